@@ -1,0 +1,35 @@
+"""coloradar: read, process, simulate and evaluate ColoRadar 4D mmWave radar data.
+
+Quick start::
+
+    import coloradar as cr
+    seq = cr.open_sequence("12_21_2020_ec_hallways_run0.zip", calib="calib")
+    adc = seq.cascade.adc[0]                       # complex64 (tx, rx, chirp, sample)
+"""
+
+from .calib import Calibration, RadarCalib, load_calibration
+from .errors import (
+    CalibrationError,
+    CalibrationWarning,
+    ColoradarError,
+    DataWarning,
+    FormatError,
+    MissingDataError,
+    OutputExistsError,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Calibration",
+    "CalibrationError",
+    "CalibrationWarning",
+    "ColoradarError",
+    "DataWarning",
+    "FormatError",
+    "MissingDataError",
+    "OutputExistsError",
+    "RadarCalib",
+    "__version__",
+    "load_calibration",
+]

@@ -1,0 +1,56 @@
+"""Typed, frozen calibration objects parsed from ColoRadar calib files, and derived quantities."""
+
+from .antenna import AntennaConfig, VirtualArray, format_antenna_cfg, parse_antenna_cfg
+from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib
+from .heatmap_grid import HeatmapConfig, format_heatmap_cfg, parse_heatmap_cfg, shipped_angle_bins
+from .phase_frequency import (
+    PhaseFrequencyCalib,
+    format_phase_frequency_calib,
+    parse_phase_frequency_calib,
+)
+from .presets import PRESET_TRANSFORMS, preset_calibration, preset_radar
+from .sensor import (
+    RADARS,
+    SENSORS,
+    Calibration,
+    RadarCalib,
+    load_calibration,
+    load_radar_calib,
+    write_calibration,
+)
+from .transforms import Extrinsic, format_transform, parse_transform
+from .waveform import SPEED_OF_LIGHT, WaveformConfig, format_waveform_cfg, parse_waveform_cfg
+
+__all__ = [
+    "PRESET_TRANSFORMS",
+    "RADARS",
+    "SENSORS",
+    "SPEED_OF_LIGHT",
+    "AntennaConfig",
+    "Calibration",
+    "CouplingCalib",
+    "Extrinsic",
+    "HeatmapConfig",
+    "PhaseFrequencyCalib",
+    "RadarCalib",
+    "VirtualArray",
+    "WaveformConfig",
+    "format_antenna_cfg",
+    "format_coupling_calib",
+    "format_heatmap_cfg",
+    "format_phase_frequency_calib",
+    "format_transform",
+    "format_waveform_cfg",
+    "load_calibration",
+    "load_radar_calib",
+    "parse_antenna_cfg",
+    "parse_coupling_calib",
+    "parse_heatmap_cfg",
+    "parse_phase_frequency_calib",
+    "parse_transform",
+    "parse_waveform_cfg",
+    "preset_calibration",
+    "preset_radar",
+    "shipped_angle_bins",
+    "write_calibration",
+]

@@ -1,0 +1,102 @@
+"""Cascade per-channel phase and frequency calibration (``phase_frequency_calib.txt``).
+
+The four chips of the cascade board have their own LO paths: each (TX, RX) channel has a
+phase offset and a small delay, measured on a corner reflector at about 3 m. The file gives, per
+channel, the reflector's (fractional) range bin ``f[t, r]`` (≈ 51) and the complex phase
+``P[t, r]``. The correction is relative to channel (tx 0, rx 0) (DESIGN.md §2)::
+
+    A_fcal[n] = A[n] · exp(−j2π (f[t,r] − f[0,0]) · (S/S_cal)·(fs_cal/fs) · n / Ns)
+    A_pcal    = A_fcal · P[0,0] / P[t,r]
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import CalibrationError
+from ._parse import readonly
+
+__all__ = ["PhaseFrequencyCalib", "format_phase_frequency_calib", "parse_phase_frequency_calib"]
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseFrequencyCalib:
+    """Per-channel calibration of a cascade radar.
+
+    Attributes
+    ----------
+    frequency
+        float64 ``(tx, rx)``: the reflector's range bin seen by each channel.
+    phase
+        complex128 ``(tx, rx)``: the reflector's complex response per channel.
+    slope, sample_rate
+        Chirp slope [Hz/s] and sampling rate [Hz] of the calibration capture.
+    """
+
+    frequency: np.ndarray
+    phase: np.ndarray
+    slope: float
+    sample_rate: float
+
+    def __post_init__(self) -> None:
+        f = readonly(np.asarray(self.frequency, dtype=np.float64))
+        p = readonly(np.asarray(self.phase, dtype=np.complex128))
+        if f.ndim != 2 or f.shape != p.shape:
+            raise CalibrationError(f"phase/frequency calib: shapes {f.shape} and {p.shape} differ")
+        if np.any(p == 0):
+            raise CalibrationError("phase/frequency calib: a phase entry is zero (cannot divide)")
+        object.__setattr__(self, "frequency", f)
+        object.__setattr__(self, "phase", p)
+
+    @property
+    def num_tx(self) -> int:
+        return int(self.frequency.shape[0])
+
+    @property
+    def num_rx(self) -> int:
+        return int(self.frequency.shape[1])
+
+    def relative_frequency(self) -> np.ndarray:
+        """``f[t, r] − f[0, 0]``: delay of each channel relative to the reference, in range bins."""
+        return self.frequency - self.frequency[0, 0]
+
+    def relative_phase(self) -> np.ndarray:
+        """``P[0,0] / P[t,r]``: the complex factor that aligns each channel to the reference."""
+        return self.phase[0, 0] / self.phase
+
+
+def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.txt"
+                                ) -> PhaseFrequencyCalib:
+    """Parse the one-line JSON ``{"antennaCalib": {...}}`` file."""
+    try:
+        root = json.loads(text)
+        c = root["antennaCalib"]
+        ntx, nrx = int(c["numTx"]), int(c["numRx"])
+        freq = np.asarray(c["frequencyCalibrationMatrix"], dtype=np.float64)
+        ph = np.asarray(c["phaseCalibrationMatrix"], dtype=np.float64)
+        slope, fs = float(c["frequencySlope"]), float(c["samplingRate"])
+    except json.JSONDecodeError as exc:
+        raise CalibrationError(f"{name}: not valid JSON ({exc})") from None
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CalibrationError(f"{name}: expected antennaCalib with numTx, numRx, frequencySlope, "
+                               f"samplingRate and the two matrices ({exc!r})") from None
+    if freq.size != ntx * nrx or ph.size != 2 * ntx * nrx:
+        raise CalibrationError(f"{name}: expected {ntx * nrx} frequency and {2 * ntx * nrx} phase "
+                               f"values for {ntx} tx x {nrx} rx, found {freq.size} and {ph.size}")
+    phase = (ph[0::2] + 1j * ph[1::2]).reshape(ntx, nrx)
+    return PhaseFrequencyCalib(freq.reshape(ntx, nrx), phase, slope, fs)
+
+
+def format_phase_frequency_calib(c: PhaseFrequencyCalib) -> str:
+    """The dataset's one-line JSON text for ``c``."""
+    ph = np.empty(c.phase.size * 2)
+    ph[0::2] = c.phase.real.ravel()
+    ph[1::2] = c.phase.imag.ravel()
+    return json.dumps({"antennaCalib": {
+        "numTx": c.num_tx, "numRx": c.num_rx, "frequencySlope": c.slope,
+        "samplingRate": c.sample_rate,
+        "frequencyCalibrationMatrix": c.frequency.ravel().tolist(),
+        "phaseCalibrationMatrix": ph.tolist()}}) + "\n"

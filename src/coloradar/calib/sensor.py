@@ -1,0 +1,245 @@
+"""Calibration of a whole rig: both radars and the extrinsics, loaded from a calib folder or zip."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import CalibrationError, CalibrationWarning, ColoradarError, MissingDataError
+from ..formats.atomic import atomic_write_text
+from ..formats.source import Source, open_source
+from .antenna import AntennaConfig, format_antenna_cfg, parse_antenna_cfg
+from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib
+from .heatmap_grid import HeatmapConfig, format_heatmap_cfg, parse_heatmap_cfg
+from .phase_frequency import (
+    PhaseFrequencyCalib,
+    format_phase_frequency_calib,
+    parse_phase_frequency_calib,
+)
+from .transforms import Extrinsic, format_transform, parse_transform
+from .waveform import WaveformConfig, format_waveform_cfg, parse_waveform_cfg
+
+__all__ = [
+    "RADARS",
+    "SENSORS",
+    "Calibration",
+    "RadarCalib",
+    "load_calibration",
+    "load_radar_calib",
+    "write_calibration",
+]
+
+RADARS = ("cascade", "single_chip")
+"""Names of the two radars, as in the dataset's folder names."""
+
+SENSORS = ("cascade", "single_chip", "lidar", "imu", "vicon")
+"""Sensors that have a ``transforms/base_to_<sensor>.txt``."""
+
+
+@dataclass(frozen=True, eq=False)
+class RadarCalib:
+    """Everything needed to read and process one radar's data.
+
+    Attributes
+    ----------
+    name
+        ``"cascade"`` or ``"single_chip"``.
+    waveform, antenna, heatmap
+        Chirp/frame configuration, antenna layout, heatmap grid.
+    coupling
+        Coupling profile to subtract, or None when not calibrated.
+    phase_frequency
+        Cascade per-channel calibration, or None (single chip, or not calibrated).
+    source
+        Where it was read from (a path, or ``"preset"``).
+    """
+
+    name: str
+    waveform: WaveformConfig
+    antenna: AntennaConfig
+    heatmap: HeatmapConfig
+    coupling: CouplingCalib | None = None
+    phase_frequency: PhaseFrequencyCalib | None = None
+    source: str = "preset"
+
+    def __post_init__(self) -> None:
+        w, a = self.waveform, self.antenna
+        where = f"{self.name} calibration ({self.source})"
+        if (w.num_tx, w.num_rx) != (a.num_tx, a.num_rx):
+            raise CalibrationError(f"{where}: waveform has {w.num_tx} TX x {w.num_rx} RX but the "
+                                   f"antenna layout {a.num_tx} x {a.num_rx}")
+        if self.heatmap.num_range_bins > w.num_samples:
+            raise CalibrationError(f"{where}: {self.heatmap.num_range_bins} heatmap range bins "
+                                   f"but only {w.num_samples} samples per chirp")
+        if self.coupling is not None:
+            c = self.coupling
+            if (c.num_tx, c.num_rx) != (w.num_tx, w.num_rx) or c.num_range_bins > w.num_samples:
+                raise CalibrationError(f"{where}: coupling is {c.num_tx} x {c.num_rx} x "
+                                       f"{c.num_range_bins}, waveform {w.num_tx} x {w.num_rx} x "
+                                       f"{w.num_samples}")
+        if self.phase_frequency is not None:
+            p = self.phase_frequency
+            if (p.num_tx, p.num_rx) != (w.num_tx, w.num_rx):
+                raise CalibrationError(f"{where}: phase/frequency calib is {p.num_tx} x "
+                                       f"{p.num_rx}, waveform {w.num_tx} x {w.num_rx}")
+
+    @property
+    def frame_shape(self) -> tuple[int, int, int, int]:
+        """``(tx, rx, chirp, sample)`` shape of an ADC frame."""
+        return self.waveform.frame_shape
+
+    @property
+    def heatmap_shape(self) -> tuple[int, int, int]:
+        """``(el, az, range)`` shape of one heatmap channel."""
+        return self.heatmap.shape
+
+    def summary(self) -> str:
+        """A few lines describing the radar, for ``coloradar info``."""
+        w, h, v = self.waveform, self.heatmap, self.antenna.virtual
+        extra = []
+        if self.coupling is not None:
+            extra.append("coupling")
+        if self.phase_frequency is not None:
+            extra.append("phase/frequency")
+        return (f"{w.num_tx} TX x {w.num_rx} RX ({v.num_unique} unique virtual elements), "
+                f"{w.num_chirps} loops x {w.num_samples} samples; "
+                f"range bin {w.range_bin_width:.4f} m (max {w.max_range:.1f} m), "
+                f"v_max {w.max_velocity:.2f} m/s (bin {w.velocity_bin_width:.3f} m/s); "
+                f"heatmap {h.num_elevation_bins}x{h.num_azimuth_bins}x{h.num_range_bins} "
+                f"(el x az x range); calib: {', '.join(extra) or 'none'}")
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Calibration of the ColoRadar rig.
+
+    Attributes
+    ----------
+    cascade, single_chip
+        The two radars' calibrations.
+    transforms
+        ``base_T_sensor`` extrinsics by sensor name (``cascade``, ``single_chip``, ``lidar``,
+        ``imu``, ``vicon``).
+    source
+        Where it was read from, or ``"preset"``.
+    """
+
+    cascade: RadarCalib
+    single_chip: RadarCalib
+    transforms: Mapping[str, Extrinsic] = field(default_factory=dict)
+    source: str = "preset"
+
+    def radar(self, name: str) -> RadarCalib:
+        """The calibration of radar ``name`` (``"cascade"`` or ``"single_chip"``)."""
+        if name not in RADARS:
+            raise MissingDataError(f"unknown radar {name!r}; expected one of {', '.join(RADARS)}")
+        return getattr(self, name)
+
+
+def _read_optional(src: Source, rel: str, parser, what: str):
+    if not src.exists(rel):
+        return None
+    return parser(src.read_text(rel), src.describe(rel))
+
+
+def load_radar_calib(src: Source, name: str) -> RadarCalib:
+    """Read one radar's calibration from the folder ``src`` (``waveform_cfg.txt`` etc.)."""
+    required = ("waveform_cfg.txt", "antenna_cfg.txt", "heatmap_cfg.txt")
+    missing = [f for f in required if not src.exists(f)]
+    if missing:
+        raise CalibrationError(f"{src.location}: missing {', '.join(missing)} "
+                               f"(present: {', '.join(src.listdir('')) or 'nothing'})")
+    return RadarCalib(
+        name=name,
+        waveform=parse_waveform_cfg(src.read_text("waveform_cfg.txt"),
+                                    src.describe("waveform_cfg.txt")),
+        antenna=parse_antenna_cfg(src.read_text("antenna_cfg.txt"), src.describe("antenna_cfg.txt")),
+        heatmap=parse_heatmap_cfg(src.read_text("heatmap_cfg.txt"), src.describe("heatmap_cfg.txt")),
+        coupling=_read_optional(src, "coupling_calib.txt", parse_coupling_calib, "coupling"),
+        phase_frequency=_read_optional(src, "phase_frequency_calib.txt",
+                                       parse_phase_frequency_calib, "phase/frequency"),
+        source=src.location,
+    )
+
+
+def _calib_source(path: str | os.PathLike[str]) -> Source:
+    """Find the calibration tree at ``path``: a calib folder/zip, or a folder holding one."""
+    p = Path(path)
+    if p.is_dir():
+        for cand in (p / "calib", p / "calib.zip"):
+            if cand.exists():
+                return _calib_source(cand)
+    src = open_source(p, markers=(*RADARS, "transforms"))
+    if not any(src.exists(r) for r in (*RADARS, "transforms")):
+        raise CalibrationError(f"{p}: not a ColoRadar calibration (expected cascade/, "
+                               "single_chip/ or transforms/ inside)")
+    return src
+
+
+def load_calibration(path: str | os.PathLike[str] | Source | None = None) -> Calibration:
+    """Load the rig calibration.
+
+    Parameters
+    ----------
+    path
+        A calib folder or ``calib.zip`` (holding ``cascade/``, ``single_chip/``,
+        ``transforms/``), a dataset root holding one of those, or None for the built-in presets.
+        A radar or transform missing from the folder falls back to its preset with a
+        :class:`CalibrationWarning`.
+
+    Returns
+    -------
+    Calibration
+    """
+    from . import presets
+
+    if path is None:
+        return presets.preset_calibration()
+    src = path if isinstance(path, Source) else _calib_source(path)
+    radars = {}
+    for name in RADARS:
+        if src.is_dir(name):
+            try:
+                radars[name] = load_radar_calib(src.sub(name), name)
+            except ColoradarError:
+                raise
+        else:
+            warnings.warn(f"{src.location}: no {name}/ calibration; using the built-in preset",
+                          CalibrationWarning, stacklevel=2)
+            radars[name] = presets.preset_radar(name)
+    transforms = dict(presets.PRESET_TRANSFORMS)
+    if src.is_dir("transforms"):
+        for fname in src.listdir("transforms"):
+            if fname.startswith("base_to_") and fname.endswith(".txt"):
+                rel = f"transforms/{fname}"
+                transforms[fname[len("base_to_"):-4]] = parse_transform(src.read_text(rel),
+                                                                         src.describe(rel))
+    else:
+        warnings.warn(f"{src.location}: no transforms/ folder; using the built-in rig extrinsics",
+                      CalibrationWarning, stacklevel=2)
+    return Calibration(radars["cascade"], radars["single_chip"], transforms, src.location)
+
+
+def write_calibration(calib: Calibration, folder: str | os.PathLike[str]) -> Path:
+    """Write ``calib`` as a dataset calib folder (``cascade/``, ``single_chip/``, ``transforms/``).
+
+    Every file is written atomically. Returns the folder.
+    """
+    root = Path(folder)
+    for name in RADARS:
+        rc = calib.radar(name)
+        d = root / name
+        atomic_write_text(d / "waveform_cfg.txt", format_waveform_cfg(rc.waveform))
+        atomic_write_text(d / "antenna_cfg.txt", format_antenna_cfg(rc.antenna, f"{name} layout"))
+        atomic_write_text(d / "heatmap_cfg.txt", format_heatmap_cfg(rc.heatmap))
+        if rc.coupling is not None:
+            atomic_write_text(d / "coupling_calib.txt", format_coupling_calib(rc.coupling))
+        if rc.phase_frequency is not None:
+            atomic_write_text(d / "phase_frequency_calib.txt",
+                              format_phase_frequency_calib(rc.phase_frequency))
+    for sensor, ext in calib.transforms.items():
+        atomic_write_text(root / "transforms" / f"base_to_{sensor}.txt", format_transform(ext))
+    return root

@@ -1,0 +1,1 @@
+"""Command-line interface: ``coloradar COMMAND …`` (see :mod:`coloradar.cli.main`)."""

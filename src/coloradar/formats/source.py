@@ -1,0 +1,237 @@
+"""Uniform read access to a folder or to a ``.zip`` archive, without extracting anything.
+
+ColoRadar runs and the calibration are shipped as zips; users also unpack them. A
+:class:`Source` hides the difference: files are addressed by POSIX paths relative to the source's
+root (``"cascade/adc_samples/timestamps.txt"``), whatever the zip's own top folder is.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import zipfile
+from collections.abc import Iterable
+from pathlib import Path, PurePosixPath
+
+from ..errors import FormatError, MissingDataError
+
+__all__ = ["FolderSource", "Source", "ZipSource", "open_source"]
+
+
+class Source:
+    """Read-only access to a tree of files, addressed by relative POSIX paths."""
+
+    #: What the source is, for messages: a folder path, or ``archive.zip:prefix/``.
+    location: str
+
+    def exists(self, rel: str) -> bool:
+        """True when the file or folder ``rel`` exists."""
+        raise NotImplementedError
+
+    def is_dir(self, rel: str) -> bool:
+        """True when ``rel`` is a folder (for zips: when some member lies under it)."""
+        raise NotImplementedError
+
+    def listdir(self, rel: str = "") -> list[str]:
+        """Names (not paths) of the entries directly inside folder ``rel``, sorted."""
+        raise NotImplementedError
+
+    def read_bytes(self, rel: str) -> bytes:
+        """The whole content of file ``rel``; :class:`MissingDataError` when absent."""
+        raise NotImplementedError
+
+    def read_text(self, rel: str) -> str:
+        """The content of text file ``rel`` decoded as UTF-8."""
+        try:
+            return self.read_bytes(rel).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise FormatError(f"{self.describe(rel)}: expected a UTF-8 text file ({exc})") from None
+
+    def file_size(self, rel: str) -> int:
+        """Size of file ``rel`` in bytes (uncompressed size for zips)."""
+        raise NotImplementedError
+
+    def describe(self, rel: str) -> str:
+        """A human-readable name of file ``rel`` for error messages."""
+        raise NotImplementedError
+
+    def sub(self, rel: str) -> Source:
+        """The source rooted at sub-folder ``rel``."""
+        raise NotImplementedError
+
+
+class FolderSource(Source):
+    """A :class:`Source` over a folder of the file system."""
+
+    def __init__(self, root: str | os.PathLike[str]):
+        self.root = Path(root)
+        self.location = str(self.root)
+
+    def _p(self, rel: str) -> Path:
+        return self.root / rel if rel else self.root
+
+    def exists(self, rel: str) -> bool:
+        return self._p(rel).exists()
+
+    def is_dir(self, rel: str) -> bool:
+        return self._p(rel).is_dir()
+
+    def listdir(self, rel: str = "") -> list[str]:
+        p = self._p(rel)
+        if not p.is_dir():
+            raise MissingDataError(f"{p}: folder not found")
+        return sorted(os.listdir(p))
+
+    def read_bytes(self, rel: str) -> bytes:
+        p = self._p(rel)
+        try:
+            with open(p, "rb") as f:
+                return f.read()
+        except FileNotFoundError:
+            raise MissingDataError(f"{p}: file not found") from None
+
+    def file_size(self, rel: str) -> int:
+        try:
+            return self._p(rel).stat().st_size
+        except FileNotFoundError:
+            raise MissingDataError(f"{self._p(rel)}: file not found") from None
+
+    def describe(self, rel: str) -> str:
+        return str(self._p(rel))
+
+    def sub(self, rel: str) -> FolderSource:
+        return FolderSource(self._p(rel))
+
+    def path(self, rel: str) -> Path:
+        """The file-system path of ``rel`` (folder sources only)."""
+        return self._p(rel)
+
+    def __repr__(self) -> str:
+        return f"FolderSource({self.location!r})"
+
+
+class _ZipIndex:
+    """The member list of one archive, opened lazily and re-opened after a fork."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._lock = threading.Lock()
+        self._zf: zipfile.ZipFile | None = None
+        self._pid = -1
+        try:
+            with zipfile.ZipFile(path) as zf:
+                infos = zf.infolist()
+        except (zipfile.BadZipFile, OSError) as exc:
+            raise FormatError(f"{path}: expected a readable zip archive ({exc})") from None
+        self.sizes: dict[str, int] = {}
+        self.dirs: dict[str, set[str]] = {"": set()}
+        for info in infos:
+            name = info.filename.rstrip("/")
+            if not name:
+                continue
+            parts = PurePosixPath(name).parts
+            for i in range(len(parts)):
+                parent = "/".join(parts[:i])
+                self.dirs.setdefault(parent, set()).add(parts[i])
+            if info.is_dir():
+                self.dirs.setdefault(name, set())
+            else:
+                self.sizes[name] = info.file_size
+
+    def read(self, name: str) -> bytes:
+        with self._lock:
+            if self._zf is None or self._pid != os.getpid():
+                self._zf = zipfile.ZipFile(self.path)
+                self._pid = os.getpid()
+            return self._zf.read(name)
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_zf"] = None
+        state["_lock"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+
+class ZipSource(Source):
+    """A :class:`Source` over a zip archive (or a folder inside one), read in place."""
+
+    def __init__(self, archive: str | os.PathLike[str], prefix: str = "",
+                 _index: _ZipIndex | None = None):
+        self.archive = Path(archive)
+        self._index = _index if _index is not None else _ZipIndex(self.archive)
+        self.prefix = prefix.strip("/")
+        self.location = f"{self.archive}:{self.prefix}/" if self.prefix else str(self.archive)
+
+    def _n(self, rel: str) -> str:
+        rel = rel.strip("/")
+        if self.prefix:
+            return f"{self.prefix}/{rel}" if rel else self.prefix
+        return rel
+
+    def exists(self, rel: str) -> bool:
+        n = self._n(rel)
+        return n in self._index.sizes or n in self._index.dirs
+
+    def is_dir(self, rel: str) -> bool:
+        return self._n(rel) in self._index.dirs
+
+    def listdir(self, rel: str = "") -> list[str]:
+        n = self._n(rel)
+        if n not in self._index.dirs:
+            raise MissingDataError(f"{self.describe(rel)}: folder not found in archive")
+        return sorted(self._index.dirs[n])
+
+    def read_bytes(self, rel: str) -> bytes:
+        n = self._n(rel)
+        if n not in self._index.sizes:
+            raise MissingDataError(f"{self.describe(rel)}: file not found in archive")
+        return self._index.read(n)
+
+    def file_size(self, rel: str) -> int:
+        n = self._n(rel)
+        if n not in self._index.sizes:
+            raise MissingDataError(f"{self.describe(rel)}: file not found in archive")
+        return self._index.sizes[n]
+
+    def describe(self, rel: str) -> str:
+        return f"{self.archive}:{self._n(rel)}"
+
+    def sub(self, rel: str) -> ZipSource:
+        return ZipSource(self.archive, self._n(rel), _index=self._index)
+
+    def __repr__(self) -> str:
+        return f"ZipSource({self.location!r})"
+
+
+def open_source(path: str | os.PathLike[str], markers: Iterable[str] = ()) -> Source:
+    """Open a folder or a zip as a :class:`Source`.
+
+    For a zip, when ``markers`` are given and none lies at the archive's top level but all lie in
+    its single top folder (``run0.zip`` holding ``run0/cascade/…``), the source is rooted there.
+
+    Parameters
+    ----------
+    path
+        A folder or a ``.zip`` file.
+    markers
+        Names expected at the root of the tree (e.g. ``("cascade", "imu")``).
+    """
+    p = Path(path)
+    if p.is_dir():
+        return FolderSource(p)
+    if not p.exists():
+        raise MissingDataError(f"{p}: no such folder or zip file")
+    if not zipfile.is_zipfile(p):
+        raise FormatError(f"{p}: expected a folder or a zip archive")
+    src = ZipSource(p)
+    markers = tuple(markers)
+    top = src.listdir("")
+    if markers and not any(m in top for m in markers):
+        dirs = [t for t in top if src.is_dir(t) and not t.startswith("__MACOSX")]
+        if len(dirs) == 1:
+            return src.sub(dirs[0])
+    return src
