@@ -8,6 +8,7 @@ Quick start::
 """
 
 from .calib import Calibration, RadarCalib, load_calibration
+from .dataset import Dataset, Sequence, open_dataset, open_sequence
 from .errors import (
     CalibrationError,
     CalibrationWarning,
@@ -25,11 +26,15 @@ __all__ = [
     "CalibrationError",
     "CalibrationWarning",
     "ColoradarError",
+    "Dataset",
     "DataWarning",
     "FormatError",
     "MissingDataError",
     "OutputExistsError",
     "RadarCalib",
+    "Sequence",
     "__version__",
     "load_calibration",
+    "open_dataset",
+    "open_sequence",
 ]

@@ -144,6 +144,8 @@ def parse_antenna_cfg(text: str, name: str = "antenna_cfg.txt") -> AntennaConfig
             else:
                 raise CalibrationError(f"{name}, line {lineno}: unexpected line {line[:60]!r}; "
                                        "expected num_rx N, num_tx N, F_design GHz or rx|tx idx az el")
+        except CalibrationError:
+            raise
         except ValueError:
             raise CalibrationError(f"{name}, line {lineno}: expected numbers in {line[:60]!r}") from None
     if f_design is None:

@@ -1,0 +1,39 @@
+"""``coloradar info PATH``: what a dataset root or a run holds."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..dataset import open_dataset, open_sequence
+from ..calib import load_calibration
+from ..dataset.dataset import is_run_folder
+from ..dataset.info import format_calibration_summary, format_sequence_summary
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "info", help="summarise a dataset root or a run (folder or zip)",
+        description="Sensors present, frame counts, duration, rate of each stream, gaps in "
+                    "timestamps, and the calibration of a ColoRadar dataset root or run.")
+    p.add_argument("path", help="dataset root, run folder, or run .zip")
+    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    path = Path(args.path)
+    if path.is_dir() and (path / "transforms").is_dir() and not is_run_folder(path):
+        print(format_calibration_summary(load_calibration(path)))
+        return 0
+    if path.is_dir() and not is_run_folder(path):
+        ds = open_dataset(path, calib=args.calib)
+        print(f"dataset {path}: {len(ds)} runs")
+        for seq in ds:
+            print(format_sequence_summary(seq))
+        print(format_calibration_summary(ds.calib))
+        return 0
+    seq = open_sequence(path, calib=args.calib)
+    print(format_sequence_summary(seq))
+    print(format_calibration_summary(seq))
+    return 0
