@@ -7,9 +7,9 @@ import warnings
 
 import numpy as np
 import pytest
-from _synth import REFERENCE_CALIB
 
 import coloradar as cr
+from _synth import REFERENCE_CALIB
 from coloradar import calib as cb
 
 C = 299_792_458.0
@@ -176,7 +176,7 @@ def test_malformed_antenna_cfg(text, match):
 
 
 def test_malformed_waveform_and_coupling():
-    with pytest.raises(cr.CalibrationError, match="waveform_cfg.txt: missing key 'frequency_slope'"):
+    with pytest.raises(cr.CalibrationError, match=r"waveform_cfg\.txt: missing key 'frequency_slope'"):
         cb.parse_waveform_cfg("num_rx 4\nnum_tx 3\nnum_adc_samples_per_chirp 128\nnum_chirps_per_frame 128\n"
                               "adc_sample_frequency 1e7\nstart_frequency 77e9\nidle_time 1e-4\n"
                               "adc_start_time 7e-6\nramp_end_time 2e-5\n", "waveform_cfg.txt")

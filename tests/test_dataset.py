@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _synth import write_run, zip_folder
 
 import coloradar as cr
+from _synth import write_run, zip_folder
 from coloradar.formats.source import FolderSource
 
 RUN = "12_21_2020_ec_hallways_run0"
@@ -63,7 +63,7 @@ def test_open_dataset_lists_folders_and_zips(dataset_root):
 
 
 def test_folder_and_zip_give_identical_arrays(dataset_root, tmp_path):
-    root, truth, _ = dataset_root
+    root, _truth, _ = dataset_root
     flat = zip_folder(root / RUN, tmp_path / f"{RUN}.zip")  # content at the archive's root
     shutil.copytree(root / "calib", tmp_path / "calib")
     a = cr.open_sequence(root / RUN)
@@ -210,7 +210,7 @@ def test_info_reports_gaps(tmp_path):
 def test_sequence_and_stream_pickle(dataset_root):
     import pickle
 
-    root, truth, _ = dataset_root
+    root, _truth, _ = dataset_root
     seq = cr.open_dataset(root)["12_22_2020_arpg_lab_run1"]
     st = pickle.loads(pickle.dumps(seq.cascade.adc))
     np.testing.assert_array_equal(st[0], seq.cascade.adc[0])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..dataset import open_dataset, open_sequence
 from ..calib import load_calibration
+from ..dataset import open_dataset, open_sequence
 from ..dataset.dataset import is_run_folder
 from ..dataset.info import format_calibration_summary, format_sequence_summary
 

@@ -9,8 +9,7 @@ from pathlib import Path
 
 from ..calib import Calibration, load_calibration
 from ..errors import CalibrationWarning, MissingDataError
-from ..formats.source import open_source
-from ..formats.source import FolderSource
+from ..formats.source import FolderSource, open_source
 from .sequence import SENSOR_FOLDERS, Sequence, is_run
 
 __all__ = ["Dataset", "open_dataset"]

@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import ColoradarError
 from .sequence import Sequence
 
-__all__ = ["StreamSummary", "summarize_sequence", "summarize_timestamps", "format_sequence_summary"]
+__all__ = ["StreamSummary", "format_sequence_summary", "summarize_sequence", "summarize_timestamps"]
 
 
 @dataclass

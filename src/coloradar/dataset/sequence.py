@@ -174,7 +174,7 @@ class Sequence:
 
     def _has_stream(self, key: str) -> bool:
         if key in STREAMS:
-            folder, data_dir, _ = STREAMS[key]
+            _folder, data_dir, _ = STREAMS[key]
             return self.source.is_dir(data_dir)
         if key == "imu":
             return self.source.exists("imu/imu_data.txt")
