@@ -27,6 +27,10 @@ class MissingDataError(ColoradarError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
+class ExtrapolationError(ColoradarError, ValueError):
+    """A time asked of a trajectory or stream lies outside the span it covers."""
+
+
 class OutputExistsError(ColoradarError, FileExistsError):
     """An output would overwrite existing files and overwriting was not requested."""
 

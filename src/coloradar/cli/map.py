@@ -1,0 +1,51 @@
+"""``coloradar map RUN --out map.pcd``: a run's point clouds accumulated in the world frame."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from functools import partial
+from pathlib import Path
+
+from ..dataset import open_sequence
+from ..errors import OutputExistsError
+from ..geometry import MAP_SOURCES, build_map, print_progress, write_point_file
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "map", help="accumulate a run's lidar or radar point clouds into a world-frame map",
+        description="Move every point cloud of a time window into the world frame with the "
+                    "interpolated ground truth and the sensor's extrinsic, optionally voxel "
+                    "down-sample, and write a PCD or PLY file (by the --out suffix).")
+    p.add_argument("run", help="run folder or .zip")
+    p.add_argument("--out", required=True, help="output .pcd or .ply file")
+    p.add_argument("--sensor", default="lidar", choices=sorted(MAP_SOURCES),
+                   help="whose point clouds (default: lidar)")
+    p.add_argument("--start", type=float, default=0.0,
+                   help="window start, seconds after the first ground-truth pose (default 0)")
+    p.add_argument("--duration", type=float, help="window length in seconds (default: to the end)")
+    p.add_argument("--voxel", type=float, help="voxel size in metres for down-sampling")
+    p.add_argument("--stride", type=int, default=1, help="use every N-th frame (default 1)")
+    p.add_argument("--min-range", type=float, default=0.0,
+                   help="drop points closer to the sensor than this [m] (the rig itself)")
+    p.add_argument("--max-range", type=float, help="drop points farther than this [m]")
+    p.add_argument("--ascii", action="store_true", help="write ascii instead of binary")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise OutputExistsError(f"{out}: exists; pass --overwrite to replace it")
+    seq = open_sequence(args.run, calib=args.calib)
+    m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
+                  voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,
+                  min_range=args.min_range,
+                  progress=partial(print_progress, label=f"{args.sensor} frames "))
+    write_point_file(out, m.points, m.fields, binary=not args.ascii, overwrite=args.overwrite)
+    print(f"{out}: {len(m.points):,} points from {m.frame_indices.size} {args.sensor} frames "
+          f"({', '.join(m.fields)}, world frame)", file=sys.stdout)
+    return 0

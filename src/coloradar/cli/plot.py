@@ -1,0 +1,59 @@
+"""``coloradar plot RUN --frame I --view VIEW --out FILE.png``: one picture of one frame."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..calib import RADARS
+from ..dataset import open_sequence
+from ..errors import OutputExistsError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plot", help="draw one frame of a run: range-Doppler, range-azimuth, heatmap or scene",
+        description="range-doppler and range-azimuth are computed from the radar's raw ADC "
+                    "frame; heatmap slices the run's heatmap (azimuth-range at the elevation of "
+                    "the strongest cell, or elevation-azimuth with --slice); scene draws the "
+                    "lidar, both radars' points (coloured by range rate) and the ground truth "
+                    "in one frame. Written without a display.")
+    p.add_argument("run", help="run folder or .zip")
+    p.add_argument("--view", required=True,
+                   choices=("range-doppler", "range-azimuth", "heatmap", "scene"))
+    p.add_argument("--frame", type=int, default=0,
+                   help="frame index (of the radar's stream; for scene, of --stream)")
+    p.add_argument("--out", required=True, help="output image (.png, .pdf, .svg)")
+    p.add_argument("--radar", default="cascade", choices=RADARS, help="which radar")
+    p.add_argument("--coords", default="base",
+                   help="scene frame: base (default), world, or a sensor name (e.g. cascade)")
+    p.add_argument("--scene-view", default="bev", choices=("bev", "3d"),
+                   help="scene: bird's-eye (default) or 3-D")
+    p.add_argument("--stream", help="scene: the stream --frame counts in (e.g. lidar/pointclouds)")
+    p.add_argument("--extent", type=float, default=20.0, help="scene half-width [m]")
+    p.add_argument("--polar", action="store_true",
+                   help="range-azimuth on azimuth/range axes instead of a bird's-eye view")
+    p.add_argument("--slice", default="azimuth-range",
+                   choices=("azimuth-range", "elevation-azimuth"), help="heatmap slice")
+    p.add_argument("--max-range", type=float, help="clip the range axis [m]")
+    p.add_argument("--dpi", type=int, default=100, help="image resolution (default 100)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..viz import frame_figure, save_figure
+
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise OutputExistsError(f"{out}: exists; pass --overwrite to replace it")
+    seq = open_sequence(args.run, calib=args.calib)
+    fig = frame_figure(seq, args.view, args.frame, radar=args.radar, coords=args.coords,
+                       scene_view=args.scene_view, stream=args.stream, extent=args.extent,
+                       heatmap_slice=args.slice, polar=args.polar, max_range=args.max_range)
+    fig.set_dpi(args.dpi)
+    save_figure(fig, out, overwrite=args.overwrite)
+    w, h = fig.canvas.get_width_height()
+    print(f"{out}: {args.view} of {seq.name} frame {args.frame} ({w}x{h} px)")
+    return 0

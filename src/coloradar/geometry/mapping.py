@@ -1,0 +1,201 @@
+"""Accumulating a map: point clouds of a time window in the world frame, voxel down-sampled."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import MissingDataError
+from .frames import sensor_to_base
+from .se3 import SE3
+from .timesync import window_indices
+from .trajectory import Trajectory, trajectory_from_groundtruth
+
+__all__ = ["MAP_SOURCES", "PointMap", "accumulate_clouds", "build_map", "print_progress",
+           "voxel_downsample"]
+
+MAP_SOURCES = {"lidar": ("lidar", "pointclouds"), "single_chip": ("single_chip", "pointclouds"),
+               "cascade": ("cascade", "pointclouds")}
+"""Sensor name -> (sequence attribute, stream attribute) of the point-cloud streams."""
+
+
+def voxel_downsample(points: np.ndarray, voxel_size: float,
+                     reduce: str = "mean") -> np.ndarray:
+    """Keep one point per occupied voxel of a regular grid.
+
+    Parameters
+    ----------
+    points
+        float ``(N, C)``, x y z first [m].
+    voxel_size
+        Edge of a cubic voxel [m]; voxel ``k`` covers ``[k·size, (k+1)·size)`` on each axis.
+    reduce
+        ``"mean"``: every column averaged over the voxel's points (the centroid, and mean
+        intensity); ``"first"``: the first point (in input order) of each voxel.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(M, C)``, same dtype, ordered by voxel key.
+    """
+    p = np.asarray(points)
+    if p.ndim != 2 or p.shape[1] < 3:
+        raise ValueError(f"expected points of shape (N, C>=3), got {p.shape}")
+    if not voxel_size > 0:
+        raise ValueError(f"voxel_size must be positive, got {voxel_size}")
+    finite = np.all(np.isfinite(p[:, :3]), axis=1)
+    p = p[finite]
+    if p.shape[0] == 0:
+        return p.copy()
+    keys = np.floor(p[:, :3].astype(np.float64) / voxel_size).astype(np.int64)
+    keys -= keys.min(axis=0)
+    dims = keys.max(axis=0) + 1
+    if np.prod(dims.astype(np.float64)) < 2.0**62:
+        flat = np.ravel_multi_index(keys.T, dims)
+        _, first, inverse = np.unique(flat, return_index=True, return_inverse=True)
+    else:  # astronomically sparse extents: fall back to row-wise unique
+        _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    if reduce == "first":
+        return p[first].copy()
+    if reduce != "mean":
+        raise ValueError(f"reduce must be 'mean' or 'first', got {reduce!r}")
+    m = first.size
+    counts = np.bincount(inverse, minlength=m).astype(np.float64)
+    out = np.empty((m, p.shape[1]), dtype=p.dtype)
+    for j in range(p.shape[1]):  # a handful of columns, each one vectorised bincount
+        out[:, j] = np.bincount(inverse, weights=p[:, j], minlength=m) / counts
+    return out
+
+
+def accumulate_clouds(clouds: Iterable[np.ndarray], poses: Iterable[SE3],
+                      voxel_size: float | None = None, max_range: float | None = None,
+                      min_range: float = 0.0) -> np.ndarray:
+    """Move each cloud with its pose and stack them, optionally down-sampling.
+
+    Parameters
+    ----------
+    clouds
+        Iterable of float ``(N_i, C)`` clouds, sensor frame.
+    poses
+        ``world_T_sensor`` of each cloud.
+    voxel_size
+        Down-sample with :func:`voxel_downsample`: each cloud before stacking (which bounds
+        memory on long windows), then the stack; a voxel's point is thus the mean of the
+        per-frame centroids, every frame that saw the voxel counting once.
+    max_range, min_range
+        Keep points whose distance from the sensor is in ``[min_range, max_range]`` [m] (lidars
+        see the rig itself; radars are noisy far out).
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 ``(M, C)``, world frame.
+    """
+    parts = []
+    for cloud, pose in zip(clouds, poses, strict=True):
+        c = np.asarray(cloud, dtype=np.float32)
+        r = np.linalg.norm(c[:, :3], axis=1)
+        keep = r >= min_range
+        if max_range is not None:
+            keep &= r <= max_range
+        w = pose.apply_to_cloud(c[keep])
+        parts.append(voxel_downsample(w, voxel_size) if voxel_size else w)
+    if not parts:
+        return np.zeros((0, 3), dtype=np.float32)
+    out = np.concatenate(parts, axis=0)
+    return voxel_downsample(out, voxel_size) if voxel_size else out
+
+
+@dataclass(frozen=True, eq=False)
+class PointMap:
+    """A point map of a run in the world frame.
+
+    Attributes
+    ----------
+    points
+        float32 ``(M, C)``.
+    fields
+        Column names (``x y z intensity`` or ``x y z intensity range_rate``).
+    sensor
+        Which sensor's clouds.
+    frame_indices
+        int64: the stream indices used.
+    timestamps
+        float64: their timestamps [s].
+    """
+
+    points: np.ndarray
+    fields: tuple[str, ...]
+    sensor: str
+    frame_indices: np.ndarray
+    timestamps: np.ndarray
+
+
+def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float | None = None,
+              voxel_size: float | None = None, stride: int = 1, max_range: float | None = None,
+              min_range: float = 0.0, trajectory: Trajectory | None = None,
+              progress: Callable[[int, int], None] | None = None) -> PointMap:
+    """Accumulate a run's point clouds into a world-frame map.
+
+    Parameters
+    ----------
+    seq
+        A sequence (:func:`coloradar.open_sequence`).
+    sensor
+        ``"lidar"``, ``"single_chip"`` (the dataset's radar point clouds) or ``"cascade"``
+        when the sequence provides cascade point clouds.
+    start, duration
+        Window in seconds from the start of the ground truth; None duration = to the end.
+        Frames outside the ground truth's span are left out.
+    voxel_size
+        Down-sample to one point per voxel of this size [m].
+    stride
+        Use every ``stride``-th frame of the window.
+    max_range, min_range
+        Range gate per point, in the sensor frame [m].
+    trajectory
+        ``world_T_base(t)``; default: the run's ground truth.
+    progress
+        Called as ``progress(done, total)`` after each frame.
+    """
+    if sensor not in MAP_SOURCES:
+        raise MissingDataError(f"no point clouds for {sensor!r}; expected one of "
+                               f"{', '.join(MAP_SOURCES)}")
+    group, attr = MAP_SOURCES[sensor]
+    stream = getattr(getattr(seq, group, None), attr, None)
+    if stream is None:
+        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {group}/{attr} stream")
+    traj = trajectory if trajectory is not None else trajectory_from_groundtruth(seq)
+    t0 = traj.start + start
+    t1 = None if duration is None else t0 + duration
+    ts = np.asarray(stream.timestamps, dtype=np.float64)
+    idx = window_indices(ts, t0, t1)
+    idx = idx[traj.covers(ts[idx])][::max(1, int(stride))]
+    if idx.size == 0:
+        until = "the end" if duration is None else f"{start + duration:g} s"
+        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {sensor} frames between "
+                               f"{start:g} s and {until} of the ground truth")
+    mount = sensor_to_base(seq.calib, sensor)
+    poses = traj.interpolate_arrays(ts[idx])
+    world = [SE3(poses[1][k], poses[0][k]) @ mount for k in range(idx.size)]
+
+    def clouds():
+        for k, i in enumerate(idx):
+            yield stream[int(i)]
+            if progress is not None:
+                progress(k + 1, idx.size)
+
+    pts = accumulate_clouds(clouds(), world, voxel_size, max_range, min_range)
+    from .cloud_io import default_fields
+
+    return PointMap(pts, default_fields(pts.shape[1]), sensor, idx, ts[idx])
+
+
+def print_progress(done: int, total: int, label: str = "") -> None:
+    """A one-line progress counter on stderr (``label done/total``)."""
+    end = "\n" if done >= total else ""
+    print(f"\r{label}{done}/{total}", end=end, file=sys.stderr, flush=True)

@@ -1,0 +1,73 @@
+"""Figure plumbing shared by the plots: headless figures, atomic saving, axis helpers.
+
+Figures are built with :class:`matplotlib.figure.Figure` and an Agg canvas attached directly,
+never through ``pyplot``: nothing needs a display, no global backend is switched for a user
+who also plots interactively, and a figure is freed when it goes out of scope.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import OutputExistsError
+from ..formats.atomic import atomic_write_bytes
+
+try:
+    import matplotlib
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+except ImportError as exc:  # pragma: no cover - depends on the environment
+    raise ImportError("coloradar.viz needs matplotlib: pip install 'coloradar[viz]'") from exc
+
+__all__ = ["cell_edges", "new_figure", "save_figure", "to_db"]
+
+matplotlib.rcParams.setdefault("figure.max_open_warning", 0)
+
+
+def new_figure(width: float = 8.0, height: float = 6.0, dpi: int = 100, *,
+               ncols: int = 1, projection: str | None = None) -> Figure:
+    """A figure of ``width x height`` inches at ``dpi`` (the PNG is ``width·dpi`` pixels wide)
+    with ``ncols`` axes side by side, laid out so that labels stay inside."""
+    fig = Figure(figsize=(width, height), dpi=dpi, layout="constrained")
+    FigureCanvasAgg(fig)
+    for k in range(ncols):
+        fig.add_subplot(1, ncols, k + 1, projection=projection)
+    return fig
+
+
+def save_figure(fig: Figure, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """Render ``fig`` to ``path`` (format from the suffix: png, pdf, svg, jpg), atomically.
+
+    Raises :class:`~coloradar.OutputExistsError` when ``path`` exists and not ``overwrite``.
+    The image has exactly the figure's size in pixels (no tight cropping).
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    buf = io.BytesIO()
+    fmt = path.suffix.lstrip(".").lower() or "png"
+    fig.savefig(buf, format=fmt, dpi=fig.dpi)
+    atomic_write_bytes(path, buf.getvalue())
+    return path
+
+
+def to_db(power: np.ndarray, floor_db: float = -300.0) -> np.ndarray:
+    """``10·log10(power)`` in float32, with zeros mapped to ``floor_db`` instead of -inf."""
+    p = np.asarray(power, dtype=np.float32)
+    with np.errstate(divide="ignore"):
+        out = 10.0 * np.log10(np.maximum(p, 0))
+    return np.maximum(out, np.float32(floor_db))
+
+
+def cell_edges(centres: np.ndarray) -> np.ndarray:
+    """Cell boundaries ``(N + 1,)`` around ascending cell ``centres`` ``(N,)``: midpoints inside,
+    half a neighbouring step outside (non-uniform grids such as sin-spaced angles)."""
+    c = np.asarray(centres, dtype=np.float64).reshape(-1)
+    if c.size == 1:
+        return np.array([c[0] - 0.5, c[0] + 0.5])
+    mid = (c[1:] + c[:-1]) / 2
+    return np.concatenate([[c[0] - (c[1] - c[0]) / 2], mid, [c[-1] + (c[-1] - c[-2]) / 2]])

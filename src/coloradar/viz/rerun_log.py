@@ -1,0 +1,131 @@
+"""Log a run to a Rerun ``.rrd`` recording for interactive 3-D viewing (``rerun run.rrd``).
+
+Optional: needs ``pip install 'coloradar[rerun]'`` (``rerun-sdk``). The entity tree mirrors
+the rig::
+
+    world                      z up
+    world/groundtruth          the whole trajectory (a line strip)
+    world/base                 world_T_base(t): ground truth, interpolated at every frame time
+    world/base/<sensor>        base_T_<sensor> (static extrinsic)
+    world/base/lidar/points    each scan, lidar frame
+    world/base/<radar>/points  radar points (point clouds, ADC detections, or a heatmap's
+                               strongest cells), coloured by range rate
+
+so Rerun composes the transforms and every point lands in the world frame at its own time.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ColoradarError, OutputExistsError
+from ..geometry import sensor_to_base, trajectory_from_groundtruth, window_indices
+from .scene import RADAR_STREAMS, _has, _run_start, _stream, radar_points, radar_source
+
+__all__ = ["log_run_rrd"]
+
+
+def _rate_colors(rate: np.ndarray, limit: float) -> np.ndarray:
+    from matplotlib import colormaps
+
+    x = np.clip((np.asarray(rate, dtype=np.float64) / limit + 1.0) / 2.0, 0.0, 1.0)
+    return (colormaps["coolwarm"](x)[:, :3] * 255).astype(np.uint8)
+
+
+def log_run_rrd(seq, out: str | os.PathLike[str], *, start: float = 0.0,
+                duration: float | None = None, max_lidar_points: int = 30000,
+                max_radar_points: int = 400, overwrite: bool = False,
+                progress: Callable[[int, int], None] | None = None) -> Path:
+    """Write the run's lidar, radar points and ground truth to a ``.rrd`` file.
+
+    Parameters
+    ----------
+    seq
+        A sequence with ground truth.
+    out
+        The ``.rrd`` file (written to a temporary name, then renamed).
+    start, duration
+        Window in seconds from the run's start (first ground-truth pose); None = to the end.
+    max_lidar_points
+        Evenly thin each lidar scan to at most this many points.
+    max_radar_points
+        Cells kept per radar heatmap when a radar has neither point clouds nor ADC frames.
+    overwrite
+        Replace an existing ``out``.
+    progress
+        ``progress(done, total)`` after each logged frame.
+    """
+    try:
+        import rerun as rr
+    except ImportError:
+        raise ColoradarError("logging to .rrd needs rerun: pip install 'coloradar[rerun]'") \
+            from None
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise OutputExistsError(f"{out}: exists; pass overwrite=True (--overwrite) to replace it")
+    traj = trajectory_from_groundtruth(seq)
+    t0 = _run_start(seq) + start
+    t1 = None if duration is None else t0 + duration
+    streams = []
+    if _has(seq, "lidar/pointclouds"):
+        streams.append(("lidar", "lidar/pointclouds"))
+    cache: dict = {}
+    for radar in RADAR_STREAMS:
+        name = radar_source(seq, radar, cache)
+        if name is not None:
+            streams.append((radar, name))
+    frames = []  # (time, sensor, stream, index)
+    for sensor, name in streams:
+        ts = _stream(seq, name).timestamps
+        idx = window_indices(ts, t0, t1)
+        idx = idx[traj.covers(ts[idx])]
+        frames += [(float(ts[i]), sensor, name, int(i)) for i in idx]
+    frames.sort()
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=".tmp.rrd", dir=out.parent)
+    os.close(fd)
+    rec = rr.RecordingStream("coloradar", recording_id=seq.name)
+    try:
+        rec.save(tmp)
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        gt_keep = window_indices(traj.timestamps, t0, t1)
+        rec.log("world/groundtruth", rr.LineStrips3D([traj.translations[gt_keep]],
+                                                     colors=[[40, 160, 40]]), static=True)
+        for sensor in {s for s, _ in streams}:
+            b_T_s = sensor_to_base(seq.calib, sensor)
+            rec.log(f"world/base/{sensor}", rr.Transform3D(
+                translation=np.array(b_T_s.translation),
+                quaternion=rr.Quaternion(xyzw=b_T_s.rotation.as_quat())), static=True)
+        limit = max((seq.calib.radar(r).waveform.max_velocity for r in RADAR_STREAMS), default=1)
+        for k, (t, sensor, name, i) in enumerate(frames):
+            rec.set_time("time", timestamp=t)
+            pose = traj.at(t)
+            rec.log("world/base", rr.Transform3D(
+                translation=np.array(pose.translation),
+                quaternion=rr.Quaternion(xyzw=pose.rotation.as_quat())))
+            data = _stream(seq, name)[i]
+            if sensor == "lidar":
+                step = max(1, int(np.ceil(len(data) / max_lidar_points)))
+                rec.log("world/base/lidar/points",
+                        rr.Points3D(data[::step, :3], radii=0.02, colors=[[150, 150, 150]]))
+            else:
+                data = radar_points(seq, sensor, name, data, max_points=max_radar_points,
+                                    cache=cache)
+                rec.log(f"world/base/{sensor}/points",
+                        rr.Points3D(data[:, :3], radii=0.06,
+                                    colors=_rate_colors(data[:, 4], limit)))
+            if progress is not None:
+                progress(k + 1, len(frames))
+        rec.flush()
+        rec.disconnect()
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return out
