@@ -1,0 +1,102 @@
+"""A dependency-free progress line with rate and ETA, for long jobs.
+
+On a terminal it redraws one line; otherwise (logs, CI) it prints a line at most every few
+seconds, so that a redirected log stays readable.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import TextIO
+
+__all__ = ["Progress"]
+
+
+def _fmt_time(s: float) -> str:
+    if s != s or s == float("inf"):
+        return "--:--"
+    s = round(s)
+    h, rem = divmod(s, 3600)
+    m, sec = divmod(rem, 60)
+    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:02d}:{sec:02d}"
+
+
+class Progress:
+    """Progress over ``total`` units, written to ``stream`` (stderr by default).
+
+    Parameters
+    ----------
+    total
+        Number of units (frames) expected.
+    desc
+        A short label printed before the bar.
+    unit
+        Name of a unit, for the rate (``frames/s``).
+    stream
+        Where to write; None for stderr. ``enabled=False`` silences it.
+    min_interval
+        Seconds between redraws (terminal) or lines (non-terminal, multiplied by 10).
+    """
+
+    def __init__(self, total: int, desc: str = "", unit: str = "frames", stream: TextIO | None = None,
+                 enabled: bool = True, min_interval: float = 0.2):
+        self.total = max(int(total), 0)
+        self.desc = desc
+        self.unit = unit
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = enabled
+        self.done = 0
+        self.failed = 0
+        self.start = time.perf_counter()
+        self._last = 0.0
+        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._interval = min_interval if self._tty else max(min_interval * 10, 2.0)
+
+    @property
+    def rate(self) -> float:
+        """Units per second so far."""
+        el = time.perf_counter() - self.start
+        return self.done / el if el > 0 else 0.0
+
+    def line(self) -> str:
+        """The current progress line."""
+        frac = self.done / self.total if self.total else 1.0
+        width = 24
+        bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
+        rate = self.rate
+        eta = (self.total - self.done) / rate if rate > 0 else float("inf")
+        fail = f", {self.failed} failed" if self.failed else ""
+        return (f"{self.desc} [{bar}] {self.done}/{self.total} {self.unit} "
+                f"{rate:.1f} {self.unit}/s elapsed {_fmt_time(time.perf_counter() - self.start)} "
+                f"ETA {_fmt_time(eta)}{fail}")
+
+    def update(self, n: int = 1, failed: int = 0) -> None:
+        """Count ``n`` more units done (``failed`` of them failed) and redraw if due."""
+        self.done += n
+        self.failed += failed
+        now = time.perf_counter()
+        if self.enabled and (now - self._last >= self._interval or self.done >= self.total):
+            self._last = now
+            self._write()
+
+    def _write(self) -> None:
+        if self._tty:
+            self.stream.write("\r" + self.line() + "\x1b[K")
+        else:
+            self.stream.write(self.line() + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        """Draw the final state and end the line."""
+        if self.enabled:
+            self._write()
+            if self._tty:
+                self.stream.write("\n")
+            self.stream.flush()
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,385 @@
+"""The radar processor: one object per radar that turns ADC frames into heatmaps, range–Doppler
+maps, detections and point clouds, with everything that depends only on the calibration
+(windows, calibration factors, coupling, TDM phases, angle grids, CFAR scale) computed once.
+
+Chain (each step a stage of :mod:`coloradar.dsp`)::
+
+    adc (tx, rx, chirp, sample) complex64
+      − coupling signal            (cube.coupling_signal: subtracting it = subtracting the file's
+                                    unwindowed range FFT)
+      − mean per chirp             (DC removal, optional)
+      × G[t, r, n]                 (cascade phase/frequency calibration, DESIGN.md §2)
+      × range window × Doppler window × (−1)^c    (unit coherent gain; (−1)^c = fftshift)
+      → range FFT, keep the first num_range_bins → Doppler FFT
+      × exp(−j2π k t/(n·Ntx))      (TDM-MIMO compensation)            = range_doppler(adc)
+      → Σ|·|² over channels        (non-coherent)                     = range_doppler_power(adc)
+      → CFAR (Doppler circular, range mirrored) → local maxima → angle per detection = detect(adc)
+      → unique virtual elements → 2D angle FFT per cell → peak over Doppler      = heatmap(adc)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+import scipy.fft as sfft
+
+from ..calib import HeatmapConfig, RadarCalib
+from ..calib.waveform import SPEED_OF_LIGHT
+from ..errors import FormatError
+from .angle import bartlett_spectrum, capon_spectrum, refine_peak
+from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
+from .cfar import CFAR_KINDS, cfar, cfar_scale, cfar_window
+from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
+from .detect import Detections, local_maxima
+from .heatmap import heatmap_from_elements
+from .tdm import tdm_phase
+from .windows import WINDOWS, coherent_window
+
+__all__ = ["ProcessingSettings", "RadarProcessor"]
+
+
+@dataclass(frozen=True)
+class ProcessingSettings:
+    """Settings of a :class:`RadarProcessor` (all keyword arguments of its constructor).
+
+    Attributes
+    ----------
+    range_window, doppler_window
+        ``"hann"``, ``"blackman"`` or ``"none"``.
+    range_fft_size, doppler_fft_size
+        FFT lengths (≥ samples / chirp loops; larger = zero padding); None = no padding.
+    num_range_bins
+        Range bins kept (heatmap and detection); None = the heatmap_cfg's.
+    dc_removal
+        Subtract each chirp's mean before anything else.
+    phase_frequency_calibration
+        Apply the cascade phase/frequency calibration when the calibration has one.
+    coupling_subtraction
+        Subtract the coupling calibration when the calibration has one.
+    coupling_domain
+        ``"raw"``: the coupling file is the FFT of uncalibrated samples (subtracted before the
+        phase/frequency calibration); ``"calibrated"``: of calibrated samples.
+    tdm_compensation
+        Compensate the TDM-MIMO Doppler phase before angle processing.
+    overlap
+        Virtual pairs sharing a position: ``"first"`` (TX-major first pair) or ``"average"``.
+    azimuth_sign, elevation_sign
+        +1 when the antenna file's az (el) axis grows toward +y (+z) (DESIGN.md §3); −1 mirrors.
+    cfar_kind, cfar_guard, cfar_train, pfa, cfar_rank
+        CFAR on the range–Doppler power map; guard/train are (Doppler, range) half-widths;
+        ``pfa`` the false-alarm probability per cell for noise (the map sums Ntx·Nrx channels,
+        and the threshold accounts for it); ``cfar_rank`` the OS rank fraction.
+    min_range
+        Detections closer than this [m] are dropped (coupling residue lives there).
+    peak_grouping
+        Keep only detections that are local maxima of the range–Doppler power (3×3).
+    angle_method
+        ``"fft"`` (Bartlett) or ``"capon"`` (MVDR per detection, see :mod:`coloradar.dsp.angle`).
+    angle_oversample
+        Detection angle grid = heatmap grid × this, before sub-bin refinement.
+    capon_loading
+        Capon diagonal loading relative to the mean eigenvalue.
+    workers
+        Threads per scipy.fft call. The default 1 is fastest for one frame on few cores (the
+        heatmap's FFTs come in cache-sized chunks too small to split); parallelism across
+        frames belongs to the batch layer (one process per core).
+    """
+
+    range_window: str = "hann"
+    doppler_window: str = "hann"
+    range_fft_size: int | None = None
+    doppler_fft_size: int | None = None
+    num_range_bins: int | None = None
+    dc_removal: bool = True
+    phase_frequency_calibration: bool = True
+    coupling_subtraction: bool = True
+    coupling_domain: str = "raw"
+    tdm_compensation: bool = True
+    overlap: str = "first"
+    azimuth_sign: int = 1
+    elevation_sign: int = 1
+    cfar_kind: str = "ca"
+    cfar_guard: tuple[int, int] = (1, 2)
+    cfar_train: tuple[int, int] = (2, 8)
+    pfa: float = 1e-4
+    cfar_rank: float = 0.75
+    min_range: float = 0.3
+    peak_grouping: bool = True
+    angle_method: str = "fft"
+    angle_oversample: int = 2
+    capon_loading: float = 0.05
+    workers: int = 1
+
+    def __post_init__(self) -> None:
+        choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
+                   "coupling_domain": ("raw", "calibrated"), "overlap": OVERLAP_MODES,
+                   "cfar_kind": CFAR_KINDS, "angle_method": ("fft", "capon"),
+                   "azimuth_sign": (1, -1), "elevation_sign": (1, -1)}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"{name} = {getattr(self, name)!r}; expected one of "
+                                 f"{', '.join(map(str, allowed))}")
+        if not 0.0 < self.pfa < 1.0:
+            raise ValueError(f"pfa must lie in (0, 1), got {self.pfa!r}")
+        if self.angle_oversample < 1 or self.capon_loading <= 0:
+            raise ValueError("angle_oversample must be >= 1 and capon_loading > 0")
+        object.__setattr__(self, "cfar_guard", tuple(int(v) for v in self.cfar_guard))
+        object.__setattr__(self, "cfar_train", tuple(int(v) for v in self.cfar_train))
+
+    def replace(self, **changes) -> ProcessingSettings:
+        """A copy with some settings changed (unknown names raise ``TypeError``)."""
+        return replace(self, **changes)
+
+
+class RadarProcessor:
+    """ADC frames of one radar → range–Doppler cubes, heatmaps, detections, point clouds.
+
+    Parameters
+    ----------
+    calib
+        The radar's calibration (``seq.calib.cascade`` or ``seq.calib.single_chip``).
+    settings
+        A :class:`ProcessingSettings`; keyword arguments override single settings.
+
+    Examples
+    --------
+    >>> proc = RadarProcessor(seq.calib.cascade, angle_method="capon")   # doctest: +SKIP
+    >>> hm = proc.heatmap(seq.cascade.adc[0])         # (el, az, range, 2) float32
+    >>> pts = proc.pointcloud(seq.cascade.adc[0])     # (N, 5) float32
+    """
+
+    def __init__(self, calib: RadarCalib, settings: ProcessingSettings | None = None,
+                 **overrides) -> None:
+        s = (settings or ProcessingSettings()).replace(**overrides)
+        self.calib = calib
+        self.settings = s
+        w, hm = calib.waveform, calib.heatmap
+        ntx, nrx, nc, ns = w.frame_shape
+        self.range_fft_size = int(s.range_fft_size or ns)
+        self.doppler_fft_size = int(s.doppler_fft_size or nc)
+        self.num_range_bins = int(s.num_range_bins or hm.num_range_bins)
+        if self.range_fft_size < ns or self.doppler_fft_size < nc:
+            raise ValueError(f"FFT sizes must be at least {ns} samples and {nc} chirp loops")
+        if not 0 < self.num_range_bins <= self.range_fft_size:
+            raise ValueError(f"num_range_bins must lie in 1..{self.range_fft_size}")
+        nd = self.doppler_fft_size
+        self.range_bin_width = SPEED_OF_LIGHT * w.sample_rate / (2.0 * w.slope
+                                                                 * self.range_fft_size)
+        self.velocities = signed_doppler_bins(nd) * (w.wavelength / (2.0 * nd * w.tdm_period))
+        """float64 ``(doppler,)``: range rate of each Doppler bin [m/s]."""
+
+        # Per-sample and per-chirp factors, fused into one (tx, rx, chirp, sample) multiplier.
+        cal = np.ones((ntx, nrx, ns), dtype=np.complex128)
+        if s.phase_frequency_calibration and calib.phase_frequency is not None:
+            cal = phase_frequency_factors(calib.phase_frequency, w)
+        wd = coherent_window(s.doppler_window, nc)
+        if nd % 2 == 0:
+            wd = wd * np.where(np.arange(nc) % 2 == 0, 1.0, -1.0)
+        self._mult = (cal[:, :, None, :] * coherent_window(s.range_window, ns)
+                      * wd[None, None, :, None]).astype(np.complex64)
+        self._coupling = None
+        if s.coupling_subtraction and calib.coupling is not None:
+            c = coupling_signal(calib.coupling, ns)
+            if s.coupling_domain == "calibrated":
+                c = c / cal
+            self._coupling = c[:, :, None, :].astype(np.complex64)
+        self._tdm = None
+        if s.tdm_compensation:
+            self._tdm = tdm_phase(ntx, signed_doppler_bins(nd), nd)[:, None, :, None]
+
+        self.grid = angle_grid(calib.antenna, w.center_frequency, hm.num_elevation_bins,
+                               hm.num_azimuth_bins, s.azimuth_sign, s.elevation_sign)
+        """:class:`~coloradar.dsp.array.AngleGrid` of the heatmap."""
+        os_ = s.angle_oversample
+        self.detection_grid = angle_grid(calib.antenna, w.center_frequency,
+                                         os_ * hm.num_elevation_bins, os_ * hm.num_azimuth_bins,
+                                         s.azimuth_sign, s.elevation_sign)
+        dg = self.detection_grid
+        self._visible = (dg.az_sines[None, :] ** 2 + dg.el_sines[:, None] ** 2) <= 1.0
+        # The map sums ntx·nrx channels of independent noise: that many exponential looks.
+        self._looks = ntx * nrx
+        n_all, n_half = cfar_window(s.cfar_guard, s.cfar_train, split_axis=1)
+        cfar_scale(s.cfar_kind, n_half if s.cfar_kind in ("go", "so") else n_all, s.pfa,
+                   rank=round(s.cfar_rank * n_all) if s.cfar_kind == "os" else 0,
+                   looks=self._looks)                                   # cached for detect()
+
+    # ------------------------------------------------------------------ cubes
+    def _check(self, adc: np.ndarray) -> np.ndarray:
+        adc = np.asarray(adc)
+        if adc.shape != self.calib.frame_shape or not np.iscomplexobj(adc):
+            raise FormatError(f"{self.calib.name} ADC frame: expected complex "
+                              f"(tx, rx, chirp, sample) = {self.calib.frame_shape}, got "
+                              f"{adc.dtype} {adc.shape}")
+        return adc
+
+    def _range_cube(self, adc: np.ndarray) -> np.ndarray:
+        """Calibrated range FFT ``(tx, rx, chirp, range)``; chirps carry the Doppler window and
+        the ``(−1)^c`` of the Doppler shift."""
+        x = self._check(adc)
+        y = x - self._coupling if self._coupling is not None else x.astype(np.complex64)
+        if y.dtype != np.complex64:
+            y = y.astype(np.complex64)
+        if self.settings.dc_removal:
+            y -= y.mean(axis=-1, keepdims=True)
+        y *= self._mult
+        out = sfft.fft(y, n=self.range_fft_size, axis=-1, workers=self.settings.workers,
+                       overwrite_x=True)
+        return out[..., : self.num_range_bins]
+
+    def _doppler(self, rcube: np.ndarray) -> np.ndarray:
+        v = sfft.fft(rcube, n=self.doppler_fft_size, axis=2, workers=self.settings.workers)
+        if self.doppler_fft_size % 2:
+            v = sfft.fftshift(v, axes=2)
+        if self._tdm is not None:
+            v *= self._tdm
+        return v
+
+    def range_doppler(self, adc: np.ndarray) -> np.ndarray:
+        """Calibrated, TDM-compensated range–Doppler cube.
+
+        Parameters
+        ----------
+        adc
+            complex ``(tx, rx, chirp, sample)`` ADC frame.
+
+        Returns
+        -------
+        numpy.ndarray
+            complex64 ``(tx, rx, doppler, range)``; Doppler index ``i`` ↔ range rate
+            ``velocities[i]``, range index ``r`` ↔ ``r · range_bin_width``. Unit coherent gain:
+            a target of amplitude ``a`` (counts) at bin centres gives ``a`` in its cell.
+        """
+        return self._doppler(self._range_cube(adc))
+
+    def range_doppler_power(self, adc: np.ndarray) -> np.ndarray:
+        """Non-coherent range–Doppler power, float32 ``(doppler, range)``: ``Σ_{tx,rx} |·|²``."""
+        return _power_sum(self.range_doppler(adc))
+
+    # ---------------------------------------------------------------- heatmap
+    def heatmap(self, adc: np.ndarray) -> np.ndarray:
+        """Heatmap in the dataset's format.
+
+        Returns
+        -------
+        numpy.ndarray
+            float32 ``(el, az, range, 2)`` on :meth:`heatmap_config`'s grid: channel 0 the peak
+            over Doppler of the angle spectrum's power (a target of amplitude ``a`` per channel
+            gives ``|a|²``), channel 1 the range rate of that peak [m/s].
+        """
+        return self._heatmap(self.range_doppler(adc))
+
+    def _heatmap(self, rd: np.ndarray) -> np.ndarray:
+        elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
+        return heatmap_from_elements(elements, self.grid, self.velocities,
+                                     workers=self.settings.workers)
+
+    def heatmap_config(self) -> HeatmapConfig:
+        """The grid of :meth:`heatmap` with the true angles of its bins (for heatmap_cfg.txt).
+
+        Elevation bins are ``asin(u_z)``; azimuth bins ``asin(u_y)``, exact in the ``el = 0``
+        plane (off it the azimuth axis measures ``cos(el)·sin(az)``; see
+        :meth:`~coloradar.dsp.array.AngleGrid.directions`).
+        """
+        g = self.grid
+        return HeatmapConfig(self.num_range_bins, g.num_el, g.num_az, self.range_bin_width,
+                             g.azimuth_angles, g.elevation_angles)
+
+    # ------------------------------------------------------------- detection
+    def detect(self, adc: np.ndarray) -> Detections:
+        """CFAR detections on the range–Doppler power map, each with its direction.
+
+        Returns
+        -------
+        Detections
+        """
+        rcube = self._range_cube(adc)
+        return self._detect(rcube, self._doppler(rcube))
+
+    def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
+        s = self.settings
+        power = _power_sum(rd).astype(np.float64)
+        modes = ("wrap", "mirror")
+        res = cfar(power, s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa, rank=s.cfar_rank,
+                   looks=self._looks, mode=modes, split_axis=1)
+        mask = res.detections
+        mask[:, : int(np.ceil(s.min_range / self.range_bin_width))] = False
+        if s.peak_grouping:
+            mask &= local_maxima(power, modes)
+        d, r = np.nonzero(mask)
+        nd, nr = power.shape
+        d_ref = refine_peak(np.stack([power[(d - 1) % nd, r], power[d, r],
+                                      power[(d + 1) % nd, r]], axis=1), d, nd, wrap=True)
+        r_ref = refine_peak(np.stack([power[d, np.maximum(r - 1, 0)], power[d, r],
+                                      power[d, np.minimum(r + 1, nr - 1)]], axis=1),
+                            r, nr, wrap=False)
+        k_signed = d_ref - nd // 2
+        vecs = rd[:, :, d, r]                                           # (tx, rx, K)
+        if self._tdm is not None:
+            # rd holds bin-centre compensation; add the fractional remainder.
+            vecs = vecs * tdm_phase(rd.shape[0], d_ref - d, nd)[:, None, :]
+        vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T   # (K, M)
+        if s.angle_method == "capon" and d.size:
+            snaps = rcube[:, :, :, r]                                    # (tx, rx, chirp, K)
+            if self._tdm is not None:
+                snaps = snaps * tdm_phase(rd.shape[0], k_signed, nd)[:, None, None, :]
+            snaps = combine_channels(snaps, self.calib.antenna.virtual, s.overlap)
+            spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
+                                  s.capon_loading, workers=s.workers)
+        else:
+            spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
+        uy, uz, peak = self._peak_directions(spec)
+        rng = r_ref * self.range_bin_width
+        unit = sines_to_unit(uy, uz)
+        xyz = rng[:, None] * unit
+        return Detections(
+            range_bin=r.astype(np.int64), doppler_bin=d.astype(np.int64), range=rng,
+            range_rate=k_signed * (self.velocities[1] - self.velocities[0]),
+            azimuth=np.arctan2(unit[:, 1], unit[:, 0]), elevation=np.arcsin(unit[:, 2]),
+            xyz=xyz, intensity=peak, power=power[d, r], snr=power[d, r] / res.noise[d, r])
+
+    def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
+        g = self.detection_grid
+        k = spec.shape[0]
+        masked = np.where(self._visible[None], spec, 0.0)
+        flat = masked.reshape(k, g.num_el * g.num_az).argmax(axis=1) if k else np.zeros(0, int)
+        ie, ia = np.divmod(flat, g.num_az)
+        kk = np.arange(k)
+        ne, na = g.num_el, g.num_az
+        fe = refine_peak(np.stack([spec[kk, (ie - 1) % ne, ia], spec[kk, ie, ia],
+                                   spec[kk, (ie + 1) % ne, ia]], axis=1), ie, ne, wrap=True)
+        fa = refine_peak(np.stack([spec[kk, ie, (ia - 1) % na], spec[kk, ie, ia],
+                                   spec[kk, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
+        uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
+        uy = 2.0 * (fa - na // 2) / (na * g.rho)
+        return uy, uz, spec[kk, ie, ia].astype(np.float64)
+
+    def pointcloud(self, adc: np.ndarray) -> np.ndarray:
+        """Point cloud of one frame, float32 ``(N, 5)``: ``x y z intensity range_rate``."""
+        return self.detect(adc).pointcloud()
+
+    def products(self, adc: np.ndarray, heatmap: bool = True, pointcloud: bool = True
+                 ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Heatmap and/or point cloud of one frame from one range–Doppler computation.
+
+        Returns
+        -------
+        tuple
+            ``(heatmap or None, pointcloud or None)`` as :meth:`heatmap` and :meth:`pointcloud`.
+        """
+        rcube = self._range_cube(adc)
+        rd = self._doppler(rcube)
+        pts = self._detect(rcube, rd).pointcloud() if pointcloud else None
+        return (self._heatmap(rd) if heatmap else None), pts
+
+    def __repr__(self) -> str:
+        changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
+                   if getattr(self.settings, f.name) != f.default}
+        return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+def _power_sum(cube: np.ndarray) -> np.ndarray:
+    mag = np.abs(cube)
+    np.square(mag, out=mag)
+    return mag.sum(axis=(0, 1))

@@ -1,0 +1,67 @@
+"""RadarProcessor settings, zero padding, input checks and shared products."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from coloradar.calib import preset_radar
+from coloradar.dsp import ProcessingSettings, RadarProcessor
+from coloradar.errors import FormatError
+from coloradar.sim import synthesize_adc
+
+C0 = 299_792_458.0
+
+
+def test_zero_padding_refines_range_and_doppler_bins():
+    calib = preset_radar("single_chip")
+    w = calib.waveform
+    r, v = 3.33, 0.77
+    adc = synthesize_adc(calib, [[r, 0.0, 0.0]], [[v, 0.0, 0.0]], r**2)
+    plain = RadarProcessor(calib)
+    padded = RadarProcessor(calib, range_fft_size=4 * w.num_samples,
+                            doppler_fft_size=4 * w.num_chirps, num_range_bins=256)
+    dr = C0 * w.sample_rate / (2 * w.slope * w.num_samples)
+    assert padded.heatmap_config().range_bin_width == pytest.approx(dr / 4)
+    assert padded.heatmap_config().num_range_bins == 256
+    for proc, width in ((plain, dr), (padded, dr / 4)):
+        hm = proc.heatmap(adc)
+        e, a, rb = np.unravel_index(np.argmax(hm[..., 0]), hm.shape[:3])
+        assert abs(rb * width - r) <= width / 2 + 1e-9
+        vbin = proc.velocities[1] - proc.velocities[0]
+        assert abs(hm[e, a, rb, 1] - v) <= vbin / 2 + 1e-6
+    assert padded.velocities[1] - padded.velocities[0] == pytest.approx(
+        w.velocity_bin_width / 4)
+
+
+def test_products_share_one_computation_and_match_single_calls():
+    calib = preset_radar("cascade")
+    adc = synthesize_adc(calib, [[4.0, 1.0, 0.2]], [[0.5, 0.0, 0.0]], 4e3, noise_std=3.0, rng=0)
+    proc = RadarProcessor(calib)
+    hm, pts = proc.products(adc)
+    np.testing.assert_array_equal(hm, proc.heatmap(adc))
+    np.testing.assert_array_equal(pts, proc.pointcloud(adc))
+    assert proc.products(adc, heatmap=False)[0] is None
+
+
+def test_settings_are_validated():
+    with pytest.raises(ValueError, match="range_window"):
+        ProcessingSettings(range_window="hamming")
+    with pytest.raises(ValueError, match="azimuth_sign"):
+        RadarProcessor(preset_radar("single_chip"), azimuth_sign=0)
+    with pytest.raises(TypeError):
+        RadarProcessor(preset_radar("single_chip"), no_such_setting=1)
+    with pytest.raises(ValueError, match="FFT sizes"):
+        RadarProcessor(preset_radar("single_chip"), range_fft_size=64)
+    s = ProcessingSettings(pfa=1e-3).replace(angle_method="capon")
+    assert (s.pfa, s.angle_method) == (1e-3, "capon")
+    assert "angle_method" in repr(RadarProcessor(preset_radar("single_chip"), s))
+
+
+def test_wrong_frame_shape_is_a_format_error():
+    proc = RadarProcessor(preset_radar("cascade"))
+    bad = np.zeros(preset_radar("single_chip").frame_shape, np.complex64)
+    with pytest.raises(FormatError, match=r"\(tx, rx, chirp, sample\)"):
+        proc.heatmap(bad)
+    with pytest.raises(FormatError):
+        proc.pointcloud(np.zeros(proc.calib.frame_shape, np.int16))
