@@ -306,7 +306,6 @@ TARGET_R, TARGET_AZ, TARGET_RR = 4.0, np.radians(20.0), -0.5
 @pytest.fixture(scope="module")
 def adc_run(tmp_path_factory):
     """A run with one cascade ADC frame of a single simulated scatterer (physics model)."""
-    pytest.importorskip("coloradar.dsp")
     from coloradar.sim import synthesize_adc
 
     root = tmp_path_factory.mktemp("adcrun")

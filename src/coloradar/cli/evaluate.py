@@ -1,0 +1,39 @@
+"""``coloradar evaluate DIR``: odometry output against the run's ground truth."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..odometry import evaluate_odometry, format_evaluation, write_evaluation
+from ..odometry.metrics import ALIGNMENTS
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "evaluate", help="compare odometry output with the run's ground truth",
+        description="Read DIR/trajectory.txt (TUM) and DIR/ego_velocity.csv written by "
+                    "'coloradar odometry', and report the ego-velocity error against the "
+                    "ground-truth radar velocity, the ATE after alignment and the RPE over "
+                    "fixed distances. Writes DIR/evaluation.txt, DIR/evaluation.json, "
+                    "DIR/groundtruth.txt (TUM, for evo) and DIR/evaluation.png (with "
+                    "matplotlib).")
+    p.add_argument("dir", help="output folder of 'coloradar odometry'")
+    p.add_argument("--run", help="run folder or .zip (default: the one named in odometry.json)")
+    p.add_argument("--calib", help="calib folder or calib.zip (default: the odometry's)")
+    p.add_argument("--align", choices=ALIGNMENTS, default="se3",
+                   help="trajectory alignment before the ATE (default se3: Umeyama)")
+    p.add_argument("--distances", type=float, nargs="+", default=[1.0, 2.0, 5.0],
+                   metavar="M", help="RPE segment lengths in metres (default 1 2 5)")
+    p.add_argument("--no-plot", action="store_true", help="do not write evaluation.png")
+    p.add_argument("--overwrite", action="store_true", help="replace an earlier evaluation")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    ev = evaluate_odometry(args.dir, args.run, calib=args.calib, align=args.align,
+                           distances=tuple(args.distances))
+    files = write_evaluation(ev, args.dir, plot=not args.no_plot, overwrite=args.overwrite)
+    print(format_evaluation(ev), end="")
+    for path in files:
+        print(f"  wrote {path}")
+    return 0

@@ -1,0 +1,115 @@
+"""``coloradar simulate``: write a simulated run (calib + run folder) from a built-in or file scene."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from ..errors import ColoradarError, OutputExistsError
+
+__all__ = ["StageProgress", "register", "run"]
+
+
+class StageProgress:
+    """Progress of several concurrent stages on one stderr line (redrawn on a terminal,
+    a line every few seconds otherwise)."""
+
+    def __init__(self, label: str, stream=None, enabled: bool = True):
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.stages: dict[str, tuple[int, int]] = {}
+        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._last = 0.0
+        self._drawn = False
+        self._text = ""
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        self.stages[stage] = (done, total)
+        now = time.monotonic()
+        finished = all(d >= t for d, t in self.stages.values())
+        if not self.enabled or (now - self._last < (0.2 if self._tty else 5.0) and not finished):
+            return
+        text = "  ".join(f"{s} {d}/{t}" for s, (d, t) in self.stages.items())
+        if text == self._text:
+            return
+        self._last, self._text = now, text
+        end = "" if self._tty else "\n"
+        print(f"\r{self.label}: {text}\033[K" if self._tty else f"{self.label}: {text}",
+              end=end, file=self.stream, flush=True)
+        self._drawn = True
+
+    def close(self) -> None:
+        """End the progress line."""
+        if self.enabled and self._drawn and self._tty:
+            print(file=self.stream)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    from ..sim.run import SENSOR_CHOICES
+    from ..sim.scenes import SCENES
+    from ..sim.trajectory import MOTION_PROFILES
+
+    p = subparsers.add_parser(
+        "simulate", help="write a simulated run (all sensors, with known truth)",
+        description="Simulate a ColoRadar run from a scene and write it in the dataset layout: "
+                    "OUT/calib and OUT/<date>_sim_<scene>_run<seed> (raw ADC of both radars, "
+                    "single-chip point clouds, heatmaps when coloradar.dsp is available, lidar, "
+                    "IMU, ground truth, optionally Vicon) plus OUT/<run>/truth/ for evaluation.")
+    p.add_argument("out", nargs="?", type=Path, help="output folder (created if needed)")
+    p.add_argument("--scene", default="corridor",
+                   help=f"built-in scene ({', '.join(SCENES)}) or a scene .json file "
+                        "(default: corridor)")
+    p.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0); also the run "
+                   "number in the run's name")
+    p.add_argument("--motion", choices=list(MOTION_PROFILES), default="smooth",
+                   help="rig motion profile (default smooth)")
+    p.add_argument("--sensors", default=",".join(SENSOR_CHOICES),
+                   help=f"comma-separated subset of {','.join(SENSOR_CHOICES)} (default: all)")
+    p.add_argument("--vicon", action="store_true", help="also write vicon/ poses (100 Hz)")
+    p.add_argument("--no-heatmaps", action="store_true",
+                   help="do not compute heatmaps even when coloradar.dsp is available")
+    p.add_argument("--name", help="run folder name (default <date>_sim_<scene>_run<seed>)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing simulated run of the same name")
+    p.add_argument("--write-scene", type=Path, metavar="FILE",
+                   help="write the scene's JSON description to FILE (a start for your own "
+                        "scene); simulates only if OUT is given too")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..formats import atomic_write_text
+    from ..sim.run import resolve_scene, simulate_run
+
+    if args.write_scene is not None:
+        if args.write_scene.exists() and not args.overwrite:
+            raise OutputExistsError(f"{args.write_scene}: exists; pass --overwrite to replace it")
+        atomic_write_text(args.write_scene, resolve_scene(args.scene).to_json())
+        print(f"scene {args.scene!r} written to {args.write_scene}")
+        if args.out is None:
+            return 0
+    if args.out is None:
+        raise ColoradarError("give an output folder OUT (or --write-scene FILE)")
+    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
+    prog = StageProgress("simulate", enabled=not args.quiet)
+    try:
+        res = simulate_run(args.out, scene=args.scene, duration=args.duration, seed=args.seed,
+                           motion=args.motion, sensors=sensors, vicon=args.vicon,
+                           heatmaps=False if args.no_heatmaps else None, name=args.name,
+                           overwrite=args.overwrite, progress=prog)
+    finally:
+        prog.close()
+    print(f"simulated {args.duration:g} s of scene {res.scene!r} in {res.seconds:.1f} s")
+    print(f"  run:   {res.run_path}")
+    print(f"  calib: {res.calib_path}")
+    print(f"  truth: {res.run_path / 'truth'}")
+    for key, n in res.counts.items():
+        print(f"  {key:<24} {n:>6}")
+    if not res.heatmaps:
+        print("  (no heatmaps: coloradar.dsp not available or --no-heatmaps)")
+    return 0

@@ -1,0 +1,115 @@
+"""Radar ego-velocity, radar–inertial odometry, and trajectory evaluation.
+
+- :func:`estimate_ego_velocity`: the sensor's 3D velocity from one point cloud's range rates
+  (RANSAC + least squares, with covariance), robust to moving objects and false alarms.
+- :func:`radar_inertial_odometry`: ego-velocities integrated with gyro (or ground-truth)
+  attitude into the rig's trajectory.
+- :func:`run_odometry`, :func:`evaluate_odometry`: the ``coloradar odometry`` and
+  ``coloradar evaluate`` commands as functions; :func:`ego_velocity_report` for summaries.
+- :func:`absolute_trajectory_error`, :func:`relative_pose_error`, :func:`velocity_errors`,
+  :func:`umeyama_alignment`: evaluation against ground truth; TUM files for ``evo``.
+
+See ``docs/odometry.md``.
+"""
+
+from .alignment import Alignment, umeyama_alignment
+from .dead_reckoning import (
+    ORIENTATION_SOURCES,
+    cumulative_rotations,
+    dead_reckon,
+    estimate_gyro_bias,
+    integrate_gyro,
+    radar_inertial_odometry,
+)
+from .ego_velocity import (
+    EgoVelocity,
+    EgoVelocityConfig,
+    estimate_ego_velocity,
+    static_inlier_threshold,
+)
+from .evaluation import (
+    EVALUATION_FILES,
+    Evaluation,
+    evaluate_odometry,
+    evaluate_trajectory,
+    evaluation_dict,
+    format_evaluation,
+    write_evaluation,
+)
+from .metrics import (
+    ATEResult,
+    RPEResult,
+    VelocityErrors,
+    absolute_trajectory_error,
+    apply_alignment,
+    associate_trajectories,
+    path_length,
+    relative_pose_error,
+    velocity_errors,
+)
+from .pipeline import (
+    SOURCES,
+    OdometryOutput,
+    default_source,
+    ego_velocity_config,
+    run_ego_velocity,
+    run_odometry,
+)
+from .report import ego_velocity_report
+from .tum import format_tum, parse_tum, read_tum, write_tum
+from .velocity_track import (
+    EgoVelocityTrack,
+    estimate_ego_velocities,
+    format_velocity_table,
+    parse_velocity_table,
+    read_velocity_table,
+    write_velocity_table,
+)
+
+__all__ = [
+    "EVALUATION_FILES",
+    "ORIENTATION_SOURCES",
+    "SOURCES",
+    "ATEResult",
+    "Alignment",
+    "EgoVelocity",
+    "EgoVelocityConfig",
+    "EgoVelocityTrack",
+    "Evaluation",
+    "OdometryOutput",
+    "RPEResult",
+    "VelocityErrors",
+    "absolute_trajectory_error",
+    "apply_alignment",
+    "associate_trajectories",
+    "cumulative_rotations",
+    "dead_reckon",
+    "default_source",
+    "ego_velocity_config",
+    "ego_velocity_report",
+    "estimate_ego_velocities",
+    "estimate_ego_velocity",
+    "estimate_gyro_bias",
+    "evaluate_odometry",
+    "evaluate_trajectory",
+    "evaluation_dict",
+    "format_evaluation",
+    "format_tum",
+    "format_velocity_table",
+    "integrate_gyro",
+    "parse_tum",
+    "parse_velocity_table",
+    "path_length",
+    "radar_inertial_odometry",
+    "read_tum",
+    "read_velocity_table",
+    "relative_pose_error",
+    "run_ego_velocity",
+    "run_odometry",
+    "static_inlier_threshold",
+    "umeyama_alignment",
+    "velocity_errors",
+    "write_evaluation",
+    "write_tum",
+    "write_velocity_table",
+]

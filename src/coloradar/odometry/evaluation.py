@@ -1,0 +1,258 @@
+"""Evaluation of an odometry output folder against its run's ground truth.
+
+:func:`evaluate_odometry` reads ``trajectory.txt`` (and ``ego_velocity.csv`` when present) of a
+folder written by :func:`~coloradar.odometry.run_odometry` (or any TUM trajectory of the rig's
+base frame), opens the run named in ``odometry.json`` (or the one given), and computes the
+ego-velocity error (against the ground-truth velocity of the radar origin in the radar frame,
+:func:`~coloradar.geometry.rig_velocity`), the ATE after alignment, and the RPE over fixed
+distances (:mod:`.metrics`). :func:`write_evaluation` writes ``evaluation.json``,
+``evaluation.txt`` (the printed table), ``groundtruth.txt`` (the reference in TUM format, for
+``evo``) and, with matplotlib installed, ``evaluation.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MissingDataError, OutputExistsError
+from ..formats.atomic import atomic_write_text
+from ..geometry import Trajectory, trajectory_from_groundtruth
+from .metrics import (
+    ATEResult,
+    RPEResult,
+    VelocityErrors,
+    absolute_trajectory_error,
+    relative_pose_error,
+    velocity_errors,
+)
+from .pipeline import INFO_FILE, TRAJECTORY_FILE, VELOCITY_FILE
+from .tum import read_tum, write_tum
+from .velocity_track import EgoVelocityTrack, read_velocity_table
+
+__all__ = [
+    "EVALUATION_FILES",
+    "Evaluation",
+    "evaluate_odometry",
+    "evaluate_trajectory",
+    "evaluation_dict",
+    "format_evaluation",
+    "write_evaluation",
+]
+
+EVALUATION_FILES = ("evaluation.json", "evaluation.txt", "groundtruth.txt", "evaluation.png")
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """Errors of one odometry estimate.
+
+    Attributes
+    ----------
+    estimate, reference
+        The full estimated trajectory and the ground truth (``world_T_base``).
+    ate
+        Absolute trajectory error.
+    rpe
+        Relative pose errors, one per distance.
+    velocity
+        Ego-velocity errors, or None without an ego-velocity track.
+    track
+        The ego-velocity track, if any.
+    info
+        What was evaluated (run, radar, source, alignment…), JSON-compatible.
+    """
+
+    estimate: Trajectory
+    reference: Trajectory
+    ate: ATEResult
+    rpe: list[RPEResult]
+    velocity: VelocityErrors | None = None
+    track: EgoVelocityTrack | None = None
+    info: dict = field(default_factory=dict)
+
+
+def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
+                        track: EgoVelocityTrack | None = None, calib=None,
+                        align: str = "se3", distances: tuple[float, ...] = (1.0, 2.0, 5.0),
+                        max_gap: float | None = 1.0, info: dict | None = None) -> Evaluation:
+    """ATE, RPE and (with ``track`` and ``calib``) ego-velocity errors of an estimate.
+
+    Parameters
+    ----------
+    estimate, reference
+        ``world_T_base(t)`` estimated and true.
+    track
+        Ego-velocities (radar frame) to compare with the ground-truth radar velocity.
+    calib
+        The rig calibration (the radar's extrinsic), needed with ``track``.
+    align, distances, max_gap
+        See :func:`~coloradar.odometry.absolute_trajectory_error` and
+        :func:`~coloradar.odometry.relative_pose_error`.
+    info
+        Extra fields for :attr:`Evaluation.info`.
+    """
+    ate = absolute_trajectory_error(estimate, reference, align=align, max_gap=max_gap)
+    rpe = relative_pose_error(estimate, reference, distances, max_gap=max_gap)
+    vel = None
+    if track is not None and calib is not None:
+        vel = velocity_errors(track, reference, calib)
+    meta = {"align": align, "distances": [float(d) for d in distances], **(info or {})}
+    return Evaluation(estimate, reference, ate, rpe, vel, track, meta)
+
+
+def _calib_for(info: dict, calib):
+    if calib is not None:
+        return calib
+    stored = str(info.get("calib") or "")
+    if stored and stored != "preset":
+        path = Path(stored.split(".zip:")[0] + ".zip") if ".zip:" in stored else Path(stored)
+        if path.exists():
+            return path
+    return None
+
+
+def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str] | None = None,
+                      *, calib=None, align: str = "se3",
+                      distances: tuple[float, ...] = (1.0, 2.0, 5.0),
+                      max_gap: float | None = 1.0) -> Evaluation:
+    """Evaluate an odometry output folder against its run's ground truth.
+
+    Parameters
+    ----------
+    folder
+        Holds ``trajectory.txt`` (TUM), optionally ``ego_velocity.csv`` and ``odometry.json``.
+    run
+        The run (folder or zip); default: the one recorded in ``odometry.json``.
+    calib
+        Calibration (object or path); default: the one the odometry used, else the one found
+        beside the run.
+    align, distances, max_gap
+        See :func:`evaluate_trajectory`.
+
+    Returns
+    -------
+    Evaluation
+    """
+    from ..dataset import open_sequence
+
+    folder = Path(folder)
+    info: dict = {}
+    info_path = folder / INFO_FILE
+    if info_path.is_file():
+        info = json.loads(info_path.read_text(encoding="utf-8"))
+    run = run if run is not None else info.get("run")
+    if not run:
+        raise MissingDataError(f"{folder}: no {INFO_FILE} naming the run; give the run "
+                               "(--run RUN)")
+    if not (folder / TRAJECTORY_FILE).is_file():
+        raise MissingDataError(f"{folder}: no {TRAJECTORY_FILE} (a TUM trajectory); run "
+                               "'coloradar odometry RUN --out DIR' first")
+    seq = open_sequence(run, calib=_calib_for(info, calib))
+    if "groundtruth" not in seq.available():
+        raise MissingDataError(f"{seq.location}: the run has no ground truth to evaluate against")
+    reference = trajectory_from_groundtruth(seq)
+    estimate = read_tum(folder / TRAJECTORY_FILE)
+    track = read_velocity_table(folder / VELOCITY_FILE) if (folder / VELOCITY_FILE).is_file() \
+        else None
+    meta = {k: info[k] for k in ("radar", "source", "orientation") if k in info}
+    meta.update(run=str(run), run_name=seq.name, folder=str(folder))
+    return evaluate_trajectory(estimate, reference, track=track, calib=seq.calib, align=align,
+                               distances=distances, max_gap=max_gap, info=meta)
+
+
+def _f(x: float) -> float | None:
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+def evaluation_dict(ev: Evaluation) -> dict:
+    """The evaluation's figures as a JSON-compatible dict (NaN written as null)."""
+    a = ev.ate
+    out: dict = {"info": ev.info, "ate": {
+        "align": ev.info.get("align", "se3"), "poses": int(a.errors.size),
+        "rmse_m": _f(a.rmse), "mean_m": _f(a.mean), "median_m": _f(a.median),
+        "std_m": _f(a.std), "max_m": _f(a.max), "rotation_rmse_deg": _f(a.rotation_rmse),
+        "path_length_m": _f(a.path_length), "rmse_percent_of_path": _f(a.rmse_percent),
+        "scale": _f(a.alignment.scale)}}
+    out["rpe"] = [{"distance_m": r.distance, "pairs": r.pairs,
+                   "translation_percent": _f(r.translation_percent),
+                   "rotation_deg_per_m": _f(r.rotation_deg_per_m),
+                   "translation_rmse_m": _f(r.translation_rmse),
+                   "rotation_rmse_deg": _f(r.rotation_rmse)} for r in ev.rpe]
+    if ev.velocity is not None:
+        v = ev.velocity
+        out["ego_velocity"] = {
+            "frames": v.frames_total, "failed": v.frames_failed, "compared": int(v.timestamps.size),
+            "rmse_m_s": _f(v.rmse), "rmse_axes_m_s": [_f(x) for x in v.rmse_axes],
+            "mean_speed_m_s": _f(v.mean_speed)}
+    return out
+
+
+def format_evaluation(ev: Evaluation) -> str:
+    """A plain-text table of the evaluation (what ``coloradar evaluate`` prints)."""
+    i = ev.info
+    head = " · ".join(x for x in (
+        f"run {i['run_name']}" if "run_name" in i else "",
+        f"{i['radar']} radar" if "radar" in i else "",
+        f"source {i['source']}" if "source" in i else "",
+        f"attitude {i['orientation']}" if "orientation" in i else "") if x)
+    lines = [head] if head else []
+    rows: list[tuple[str, str]] = []
+    if ev.velocity is not None:
+        v = ev.velocity
+        ax = ", ".join(f"{c} {x:.3f}" for c, x in zip("xyz", v.rmse_axes, strict=True))
+        rows.append(("ego-velocity RMSE", f"{v.rmse:.3f} m/s  ({ax})  over "
+                     f"{v.timestamps.size} frames; {v.frames_failed} of {v.frames_total} "
+                     f"failed; mean speed {v.mean_speed:.2f} m/s"))
+    a = ev.ate
+    al = i.get("align", "se3")
+    scale = f", scale {a.alignment.scale:.4f}" if al == "sim3" else ""
+    rows.append((f"ATE RMSE ({al}{scale})",
+                 f"{a.rmse:.3f} m = {a.rmse_percent:.2f} % of {a.path_length:.1f} m  "
+                 f"(mean {a.mean:.3f}, median {a.median:.3f}, max {a.max:.3f} m; "
+                 f"{a.errors.size} poses)"))
+    rows.append(("ATE rotation RMSE", f"{a.rotation_rmse:.2f} deg"))
+    w = max(len(r[0]) for r in rows)
+    lines += [f"{k:<{w}}  {val}" for k, val in rows]
+    lines.append("")
+    lines.append(f"{'RPE over':>10} {'pairs':>7} {'trans [%]':>10} {'rot [deg/m]':>12} "
+                 f"{'trans RMSE [m]':>15} {'rot RMSE [deg]':>15}")
+    for r in ev.rpe:
+        lines.append(f"{r.distance:>8.1f} m {r.pairs:>7d} {r.translation_percent:>10.2f} "
+                     f"{r.rotation_deg_per_m:>12.3f} {r.translation_rmse:>15.3f} "
+                     f"{r.rotation_rmse:>15.2f}")
+    return "\n".join(lines) + "\n"
+
+
+def write_evaluation(ev: Evaluation, folder: str | os.PathLike[str], *, plot: bool = True,
+                     overwrite: bool = False) -> list[Path]:
+    """Write ``evaluation.json``, ``evaluation.txt``, ``groundtruth.txt`` and (with ``plot`` and
+    matplotlib installed) ``evaluation.png`` into ``folder``; returns the paths written.
+
+    Raises :class:`~coloradar.OutputExistsError` when any exists and not ``overwrite``.
+    """
+    folder = Path(folder)
+    names = list(EVALUATION_FILES if plot else EVALUATION_FILES[:3])
+    existing = [n for n in names if (folder / n).exists()]
+    if existing and not overwrite:
+        raise OutputExistsError(f"{folder}: holds {', '.join(existing)} already; pass "
+                                "overwrite=True (--overwrite) to replace them")
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    atomic_write_text(folder / names[0], json.dumps(evaluation_dict(ev), indent=2) + "\n")
+    atomic_write_text(folder / names[1], format_evaluation(ev))
+    written += [folder / names[0], folder / names[1]]
+    gt = ev.reference
+    written.append(write_tum(folder / names[2], gt, overwrite=True,
+                             comments=[f"ground truth world_T_base of {ev.info.get('run_name', 'the run')}"]))
+    if plot:
+        try:
+            from .plot import plot_evaluation
+        except ImportError:
+            return written
+        written.append(plot_evaluation(ev, folder / names[3], overwrite=True))
+    return written

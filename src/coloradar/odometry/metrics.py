@@ -1,0 +1,370 @@
+"""Trajectory and velocity error metrics: ATE, RPE over fixed distances, ego-velocity error.
+
+Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and ``evo``
+(M. Grupp, 2017):
+
+- **Association.** The reference (ground truth) is interpolated at the estimate's timestamps
+  (linear translation, SLERP rotation); estimate poses outside the reference's span, or within
+  a reference gap longer than ``max_gap``, are left out.
+- **ATE** (absolute trajectory error, Sturm et al., IROS 2012): after aligning the estimate's
+  positions to the reference's (SE(3) Umeyama by default, :mod:`.alignment`), the RMSE (and
+  mean, median, max) of ``|p_ref,i − T p_est,i|``. The rotation part is the angle of
+  ``R_ref,iᵀ R_a R_est,i`` where ``R_a`` is the chordal mean of ``R_ref,i R_est,iᵀ`` (the
+  rotation that best aligns the orientations): the positions of a nearly straight corridor
+  walk leave the roll about the path undetermined, and Umeyama's rotation would then show up
+  as a large, meaningless attitude error. With ``origin`` or ``none`` alignment ``R_a`` is that
+  alignment's rotation.
+- **RPE** over distance ``d``: for every pose ``i``, ``j`` is the first later pose at which the
+  reference has travelled at least ``d`` metres along its path; the error of the relative
+  motion is ``E = (ref_i⁻¹ ref_j)⁻¹ (est_i⁻¹ est_j)``. Translation error in percent is
+  ``100 · |t_E| / d`` and rotation error ``angle(E) / d`` in deg/m, averaged over the pairs
+  (the KITTI devkit's numbers; it uses d = 100…800 m for cars, 1, 2, 5 m suit a hand-held rig
+  indoors). RPE needs no alignment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..calib import Calibration
+from ..errors import ColoradarError
+from ..geometry import Trajectory, rig_velocity
+from .alignment import Alignment, umeyama_alignment
+from .velocity_track import EgoVelocityTrack
+
+__all__ = [
+    "ATEResult",
+    "RPEResult",
+    "VelocityErrors",
+    "absolute_trajectory_error",
+    "apply_alignment",
+    "associate_trajectories",
+    "path_length",
+    "relative_pose_error",
+    "velocity_errors",
+]
+
+ALIGNMENTS = ("se3", "sim3", "origin", "none")
+
+
+def path_length(positions: np.ndarray) -> np.ndarray:
+    """Cumulative distance along a path: float64 ``(N,)`` [m], starting at 0."""
+    p = np.asarray(positions, dtype=np.float64)
+    if p.shape[0] == 0:
+        return np.zeros(0)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+
+
+def associate_trajectories(estimate: Trajectory, reference: Trajectory,
+                           max_gap: float | None = 1.0) -> tuple[Trajectory, Trajectory]:
+    """The estimate's poses that the reference covers, and the reference at their times.
+
+    Parameters
+    ----------
+    estimate, reference
+        Trajectories in any time order relation (both strictly increasing).
+    max_gap
+        Leave out estimate times that fall between two reference poses more than this many
+        seconds apart [s] (interpolation across a ground-truth dropout would be a guess).
+        None: no limit.
+
+    Returns
+    -------
+    (Trajectory, Trajectory)
+        The kept estimate poses and the interpolated reference, same timestamps.
+
+    Raises
+    ------
+    ColoradarError
+        Fewer than two estimate poses lie within the reference.
+    """
+    t = estimate.timestamps
+    keep = reference.covers(t)
+    if max_gap is not None and len(reference) > 1:
+        k = reference.timestamps
+        i = np.clip(np.searchsorted(k, t, side="right") - 1, 0, len(k) - 2)
+        keep &= (k[i + 1] - k[i]) <= max_gap
+    if keep.sum() < 2:
+        raise ColoradarError(
+            f"{estimate.name}: only {int(keep.sum())} of {t.size} poses lie within the "
+            f"reference {reference.name} (span {reference.start:.3f}..{reference.end:.3f} s, "
+            f"estimate {t[0]:.3f}..{t[-1]:.3f} s); are they from the same run?")
+    est = estimate[np.flatnonzero(keep)]
+    return est, reference.interpolate(est.timestamps)
+
+
+def apply_alignment(trajectory: Trajectory, alignment: Alignment) -> Trajectory:
+    """``T · pose`` for every pose: positions ``s R p + t``, rotations ``R · R_i``."""
+    return Trajectory(trajectory.timestamps, alignment.apply(trajectory.translations),
+                      alignment.rotation * trajectory.rotations, trajectory.name)
+
+
+def _stats(e: np.ndarray) -> dict[str, float]:
+    return {"rmse": float(np.sqrt(np.mean(e * e))), "mean": float(np.mean(e)),
+            "median": float(np.median(e)), "std": float(np.std(e)), "max": float(np.max(e))}
+
+
+@dataclass(frozen=True, eq=False)
+class ATEResult:
+    """Absolute trajectory error.
+
+    Attributes
+    ----------
+    timestamps
+        float64 ``(M,)`` [s]: the associated poses.
+    errors
+        float64 ``(M,)`` [m]: position error after alignment.
+    rotation_errors
+        float64 ``(M,)`` [deg].
+    alignment
+        The transform applied to the estimate.
+    aligned
+        The aligned estimate (associated poses only).
+    reference
+        The reference at ``timestamps``.
+    rmse, mean, median, std, max
+        Of ``errors`` [m].
+    rotation_rmse
+        [deg].
+    path_length
+        Distance travelled along the reference over the associated span [m].
+    """
+
+    timestamps: np.ndarray
+    errors: np.ndarray
+    rotation_errors: np.ndarray
+    alignment: Alignment
+    aligned: Trajectory
+    reference: Trajectory
+    rmse: float
+    mean: float
+    median: float
+    std: float
+    max: float
+    rotation_rmse: float
+    path_length: float
+
+    @property
+    def rmse_percent(self) -> float:
+        """ATE RMSE as a percentage of the distance travelled (NaN for no motion)."""
+        return 100.0 * self.rmse / self.path_length if self.path_length > 0 else float("nan")
+
+
+def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
+                              align: str = "se3", max_gap: float | None = 1.0) -> ATEResult:
+    """ATE of ``estimate`` against ``reference`` (e.g. the ground truth).
+
+    Parameters
+    ----------
+    estimate, reference
+        ``world_T_body(t)`` of the same body (e.g. both the rig's base frame).
+    align
+        ``"se3"`` (Umeyama rotation + translation, the default), ``"sim3"`` (with scale),
+        ``"origin"`` (make the first associated poses coincide, evo's ``--align_origin``), or
+        ``"none"``.
+    max_gap
+        See :func:`associate_trajectories`.
+
+    Returns
+    -------
+    ATEResult
+    """
+    if align not in ALIGNMENTS:
+        raise ValueError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
+    est, ref = associate_trajectories(estimate, reference, max_gap)
+    if align in ("se3", "sim3"):
+        al = umeyama_alignment(est.translations, ref.translations, with_scale=align == "sim3")
+    elif align == "origin":
+        rot = ref.rotations[0] * est.rotations[0].inv()
+        al = Alignment(rot, ref.translations[0] - rot.apply(est.translations[0]))
+    else:
+        al = Alignment.identity()
+    aligned = apply_alignment(est, al)
+    e = np.linalg.norm(aligned.translations - ref.translations, axis=1)
+    if align in ("se3", "sim3"):
+        # Positions of a nearly straight path do not fix the roll about it, so the rotation
+        # errors use the rotation that best aligns the orientations themselves.
+        rot_al = (ref.rotations * est.rotations.inv()).mean()
+        re = np.degrees((ref.rotations.inv() * rot_al * est.rotations).magnitude())
+    else:
+        re = np.degrees((ref.rotations.inv() * aligned.rotations).magnitude())
+    st = _stats(e)
+    return ATEResult(est.timestamps, e, re, al, aligned, ref, st["rmse"], st["mean"],
+                     st["median"], st["std"], st["max"], float(np.sqrt(np.mean(re * re))),
+                     float(path_length(ref.translations)[-1]))
+
+
+@dataclass(frozen=True, eq=False)
+class RPEResult:
+    """Relative pose error over one segment length.
+
+    Attributes
+    ----------
+    distance
+        Segment length ``d`` [m].
+    start_times
+        float64 ``(K,)`` [s]: first pose of each pair.
+    translation_errors
+        float64 ``(K,)`` [m]: ``|t_E|``.
+    rotation_errors
+        float64 ``(K,)`` [deg]: ``angle(E)``.
+    """
+
+    distance: float
+    start_times: np.ndarray
+    translation_errors: np.ndarray
+    rotation_errors: np.ndarray
+
+    @property
+    def pairs(self) -> int:
+        """Number of pose pairs ``K``."""
+        return int(self.translation_errors.size)
+
+    @property
+    def translation_percent(self) -> float:
+        """Mean ``100·|t_E|/d`` (KITTI's translation error) [%]; NaN without pairs."""
+        return float(100.0 * np.mean(self.translation_errors) / self.distance) if self.pairs \
+            else float("nan")
+
+    @property
+    def rotation_deg_per_m(self) -> float:
+        """Mean ``angle(E)/d`` [deg/m]; NaN without pairs."""
+        return float(np.mean(self.rotation_errors) / self.distance) if self.pairs \
+            else float("nan")
+
+    @property
+    def translation_rmse(self) -> float:
+        """RMSE of ``|t_E|`` [m]."""
+        e = self.translation_errors
+        return float(np.sqrt(np.mean(e * e))) if self.pairs else float("nan")
+
+    @property
+    def rotation_rmse(self) -> float:
+        """RMSE of ``angle(E)`` [deg]."""
+        e = self.rotation_errors
+        return float(np.sqrt(np.mean(e * e))) if self.pairs else float("nan")
+
+
+def _relative(traj: Trajectory, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, Rotation]:
+    """``traj_i⁻¹ traj_j`` for index pairs: translations ``(K, 3)`` and rotations."""
+    ri_inv = traj.rotations[i].inv()
+    return ri_inv.apply(traj.translations[j] - traj.translations[i]), ri_inv * traj.rotations[j]
+
+
+def relative_pose_error(estimate: Trajectory, reference: Trajectory,
+                        distances: tuple[float, ...] | list[float] = (1.0, 2.0, 5.0), *,
+                        max_gap: float | None = 1.0) -> list[RPEResult]:
+    """RPE over fixed travelled distances (KITTI / evo convention, see the module docstring).
+
+    Parameters
+    ----------
+    estimate, reference
+        ``world_T_body(t)`` of the same body.
+    distances
+        Segment lengths [m].
+    max_gap
+        See :func:`associate_trajectories`.
+
+    Returns
+    -------
+    list[RPEResult]
+        One per distance (with no pairs where the run is shorter than it).
+    """
+    est, ref = associate_trajectories(estimate, reference, max_gap)
+    dist = path_length(ref.translations)
+    out = []
+    for d in distances:
+        d = float(d)
+        if not d > 0:
+            raise ValueError(f"RPE distances must be positive, got {d}")
+        # First j with dist[j] >= dist[i] + d; a hair of slack so that exact multiples of the
+        # pose spacing are not pushed one pose further by rounding of the cumulative sum.
+        j = np.searchsorted(dist, dist + d - 1e-9 * max(1.0, d), side="left")
+        i = np.flatnonzero(j < dist.size)
+        j = j[i]
+        te, re = _relative(est, i, j)
+        tr, rr = _relative(ref, i, j)
+        rr_inv = rr.inv()
+        err_t = np.linalg.norm(rr_inv.apply(te - tr), axis=1) if i.size else np.zeros(0)
+        err_r = np.degrees((rr_inv * re).magnitude()) if i.size else np.zeros(0)
+        out.append(RPEResult(d, est.timestamps[i], err_t, err_r))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class VelocityErrors:
+    """Ego-velocity estimates against the ground-truth rig velocity in the radar frame.
+
+    Attributes
+    ----------
+    timestamps
+        float64 ``(K,)`` [s]: frames compared (ok and within the ground truth).
+    estimate, reference
+        float64 ``(K, 3)`` [m/s], radar frame.
+    frames_total
+        Frames in the track.
+    frames_failed
+        Frames whose estimate was not ok.
+    """
+
+    timestamps: np.ndarray
+    estimate: np.ndarray
+    reference: np.ndarray
+    frames_total: int
+    frames_failed: int
+
+    @property
+    def errors(self) -> np.ndarray:
+        """float64 ``(K, 3)``: estimate − reference [m/s]."""
+        return self.estimate - self.reference
+
+    @property
+    def rmse(self) -> float:
+        """RMSE of the error vector's norm [m/s]."""
+        e = self.errors
+        return float(np.sqrt(np.mean(np.sum(e * e, axis=1)))) if e.size else float("nan")
+
+    @property
+    def rmse_axes(self) -> np.ndarray:
+        """float64 ``(3,)``: RMSE of each component [m/s]."""
+        e = self.errors
+        return np.sqrt(np.mean(e * e, axis=0)) if e.size else np.full(3, np.nan)
+
+    @property
+    def mean_speed(self) -> float:
+        """Mean reference speed over the compared frames [m/s]."""
+        return float(np.mean(np.linalg.norm(self.reference, axis=1))) if self.reference.size \
+            else float("nan")
+
+
+def velocity_errors(track: EgoVelocityTrack, reference: Trajectory, calib: Calibration,
+                    sensor: str | None = None) -> VelocityErrors:
+    """Compare ego-velocities with the ground truth's velocity of the radar origin.
+
+    Parameters
+    ----------
+    track
+        Estimated ego-velocities (radar frame).
+    reference
+        ``world_T_base(t)`` (ground truth).
+    calib
+        For ``base_T_<sensor>`` (the lever arm and the axes of the radar).
+    sensor
+        The radar; default ``track.frame``.
+
+    Returns
+    -------
+    VelocityErrors
+        Only frames whose estimate is ok and whose time the ground truth covers.
+    """
+    sensor = sensor or track.frame
+    use = track.ok & reference.covers(track.timestamps)
+    t = track.timestamps[use]
+    if t.size:
+        ref = rig_velocity(reference, t, calib=calib, sensor=sensor).linear
+    else:
+        ref = np.zeros((0, 3))
+    return VelocityErrors(t, track.velocity[use], ref, len(track), int((~track.ok).sum()))

@@ -1,0 +1,278 @@
+"""Run-level odometry: point clouds of a run -> ego-velocities -> trajectory, written to a folder.
+
+Point clouds come from one of three sources of a run:
+
+- ``pointclouds``: the single-chip sensor's own point clouds (as shipped);
+- ``adc``: raw ADC frames through :class:`coloradar.dsp.RadarProcessor` (either radar);
+- ``heatmaps``: heatmaps (shipped or computed) through :func:`coloradar.dsp.heatmap_pointcloud`
+  with the calibration's heatmap grid.
+
+The output folder holds ``ego_velocity.csv`` (:mod:`.velocity_track`), ``trajectory.txt``
+(TUM, ``world_T_base``) and ``odometry.json`` (what was run, on which run, with which settings),
+which :func:`~coloradar.odometry.evaluation.evaluate_odometry` reads.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..calib import RadarCalib
+from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..formats.atomic import atomic_write_text
+from ..geometry import Trajectory, trajectory_from_groundtruth, window_indices
+from .dead_reckoning import ORIENTATION_SOURCES, estimate_gyro_bias, radar_inertial_odometry
+from .ego_velocity import EgoVelocityConfig, static_inlier_threshold
+from .tum import write_tum
+from .velocity_track import EgoVelocityTrack, estimate_ego_velocities, write_velocity_table
+
+__all__ = [
+    "INFO_FILE",
+    "SOURCES",
+    "TRAJECTORY_FILE",
+    "VELOCITY_FILE",
+    "OdometryOutput",
+    "default_source",
+    "ego_velocity_config",
+    "elevation_rows",
+    "run_ego_velocity",
+    "run_odometry",
+    "run_path",
+]
+
+SOURCES = ("pointclouds", "adc", "heatmaps")
+VELOCITY_FILE = "ego_velocity.csv"
+TRAJECTORY_FILE = "trajectory.txt"
+INFO_FILE = "odometry.json"
+
+Progress = Callable[[int, int], None]
+
+
+def elevation_rows(radar_calib: RadarCalib) -> int:
+    """Distinct elevation positions of the radar's virtual array (2 for the single chip)."""
+    return int(np.unique(radar_calib.antenna.virtual.unique_positions[:, 1]).size)
+
+
+def ego_velocity_config(radar_calib: RadarCalib, **overrides) -> EgoVelocityConfig:
+    """Estimator settings suited to a radar.
+
+    The inlier threshold comes from its Doppler resolution (:func:`static_inlier_threshold`),
+    aliasing is handled at its ``v_max``, and the model is planar (``v_z = 0``, see
+    :attr:`EgoVelocityConfig.planar`) when its virtual array has fewer than 3 elevation rows:
+    two rows (the single chip) measure elevation too coarsely to observe ``v_z``. Keyword
+    arguments override single settings of :class:`EgoVelocityConfig`.
+    """
+    w = radar_calib.waveform
+    base = EgoVelocityConfig(threshold=static_inlier_threshold(w.velocity_bin_width),
+                             max_velocity=float(w.max_velocity),
+                             planar=elevation_rows(radar_calib) < 3)
+    return replace(base, **overrides)
+
+
+def default_source(seq, radar: str) -> str:
+    """The source used when none is named: the sensor's own point clouds when the run has them
+    (single chip), else ADC, else heatmaps."""
+    have = seq.available()
+    for src, key in (("pointclouds", "pointclouds"), ("adc", "adc"), ("heatmaps", "heatmaps")):
+        if f"{radar}/{key}" in have:
+            return src
+    raise MissingDataError(f"{seq.location}: the {radar} radar has no point clouds, ADC frames "
+                           f"or heatmaps in this run (present: {', '.join(have) or 'nothing'})")
+
+
+def _cloud_maker(seq, radar: str, source: str, processing: dict | None):
+    rs = seq.radar(radar)
+    if source == "pointclouds":
+        return rs.pointclouds, None
+    if source == "adc":
+        from ..dsp import RadarProcessor
+
+        proc = RadarProcessor(rs.calib, **(processing or {}))
+        return rs.adc, proc.pointcloud
+    if source == "heatmaps":
+        from ..dsp import heatmap_pointcloud
+
+        cfg = rs.calib.heatmap
+        opts = dict(processing or {})
+        opts.setdefault("min_range", 0.3)
+        return rs.heatmaps, lambda hm: heatmap_pointcloud(hm, cfg, **opts)
+    raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
+
+
+def _frames(timestamps: np.ndarray, start: float | None, duration: float | None,
+            stride: int, max_frames: int | None) -> np.ndarray:
+    if stride < 1:
+        raise ColoradarError(f"stride must be >= 1, got {stride}")
+    t0 = timestamps[0] if timestamps.size else 0.0
+    lo = None if start is None else t0 + start
+    hi = None if duration is None else (t0 if start is None else lo) + duration
+    idx = window_indices(timestamps, lo, hi)[::stride]
+    return idx if max_frames is None else idx[:max_frames]
+
+
+def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
+                     config: EgoVelocityConfig | None = None, processing: dict | None = None,
+                     start: float | None = None, duration: float | None = None,
+                     stride: int = 1, max_frames: int | None = None, seed: int = 0,
+                     progress: Progress | None = None) -> EgoVelocityTrack:
+    """Ego-velocity of one radar for (a window of) a run.
+
+    Parameters
+    ----------
+    seq
+        A :class:`coloradar.Sequence`.
+    radar
+        ``"cascade"`` or ``"single_chip"``.
+    source
+        ``"pointclouds"``, ``"adc"`` or ``"heatmaps"``; None: :func:`default_source`.
+    config
+        Estimator settings; default :func:`ego_velocity_config` of the radar.
+    processing
+        Keyword arguments for :class:`coloradar.dsp.RadarProcessor` (``adc``) or
+        :func:`coloradar.dsp.heatmap_pointcloud` (``heatmaps``).
+    start, duration
+        Window in seconds after the stream's first frame; None = from the start / to the end.
+    stride, max_frames
+        Use every ``stride``-th frame, at most ``max_frames`` of them.
+    seed
+        RANSAC seed (:func:`~coloradar.odometry.estimate_ego_velocities`).
+    progress
+        ``progress(done, total)`` after each frame.
+
+    Returns
+    -------
+    EgoVelocityTrack
+    """
+    source = source or default_source(seq, radar)
+    stream, convert = _cloud_maker(seq, radar, source, processing)
+    idx = _frames(stream.timestamps, start, duration, stride, max_frames)
+    if idx.size == 0:
+        raise ColoradarError(f"{seq.name}: no {radar} {source} frames in the chosen window")
+    cfg = config or ego_velocity_config(seq.calib.radar(radar))
+
+    def clouds() -> Iterator[np.ndarray]:
+        for k in idx:
+            frame = stream[int(k)]
+            yield frame if convert is None else convert(frame)
+
+    return estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
+                                   frame=radar, progress=progress)
+
+
+def run_path(seq) -> str:
+    """The folder or zip a sequence was opened from, absolute (to open it again later)."""
+    src = seq.source
+    p = getattr(src, "root", None) or getattr(src, "archive", None)
+    return str(Path(p).resolve()) if p is not None else seq.location
+
+
+@dataclass(frozen=True, eq=False)
+class OdometryOutput:
+    """What :func:`run_odometry` computed and wrote.
+
+    Attributes
+    ----------
+    folder
+        The output folder.
+    track
+        Ego-velocities.
+    trajectory
+        ``world_T_base`` at the radar frames.
+    files
+        Paths written.
+    """
+
+    folder: Path
+    track: EgoVelocityTrack
+    trajectory: Trajectory
+    files: list[Path]
+
+
+def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
+                 source: str | None = None, orientation: str = "imu",
+                 config: EgoVelocityConfig | None = None, processing: dict | None = None,
+                 start: float | None = None, duration: float | None = None, stride: int = 1,
+                 seed: int = 0, gyro_bias_window: float | None = None,
+                 overwrite: bool = False, progress: Progress | None = None) -> OdometryOutput:
+    """Ego-velocity and radar–inertial dead reckoning for a run, written to ``out``.
+
+    Parameters
+    ----------
+    seq
+        The run.
+    out
+        Output folder (created); gets ``ego_velocity.csv``, ``trajectory.txt`` (TUM),
+        ``odometry.json``.
+    radar, source, config, processing, start, duration, stride, seed, progress
+        See :func:`run_ego_velocity`.
+    orientation
+        ``"imu"`` (gyro attitude) or ``"groundtruth"`` (upper bound).
+    gyro_bias_window
+        Seconds at the start of the IMU stream during which the rig is at rest; their mean
+        angular rate is subtracted as gyro bias. None: no bias correction.
+    overwrite
+        Replace existing output files.
+
+    Returns
+    -------
+    OdometryOutput
+        The initial pose is the ground truth's at the first frame when the run has ground
+        truth (so that the trajectories are comparable without alignment), else the identity.
+    """
+    if orientation not in ORIENTATION_SOURCES:
+        raise ColoradarError(f"unknown orientation source {orientation!r}; expected one of "
+                             f"{', '.join(ORIENTATION_SOURCES)}")
+    folder = Path(out)
+    targets = [folder / n for n in (VELOCITY_FILE, TRAJECTORY_FILE, INFO_FILE)]
+    existing = [p.name for p in targets if p.exists()]
+    if existing and not overwrite:
+        raise OutputExistsError(f"{folder}: holds {', '.join(existing)} already; pass "
+                                "overwrite=True (--overwrite) to replace them")
+    gt = trajectory_from_groundtruth(seq) if "groundtruth" in seq.available() else None
+    if orientation == "groundtruth" and gt is None:
+        raise MissingDataError(f"{seq.location}: orientation from ground truth asked for, but "
+                               "the run has no ground truth")
+    imu_t = imu_w = bias = None
+    if orientation == "imu":
+        if "imu" not in seq.available():
+            raise MissingDataError(f"{seq.location}: the run has no IMU; use orientation "
+                                   "'groundtruth' (--orientation groundtruth)")
+        imu_t, imu_w = seq.imu.timestamps, seq.imu.angular_rates
+        if gyro_bias_window:
+            bias = estimate_gyro_bias(imu_t, imu_w, imu_t[0], imu_t[0] + gyro_bias_window)
+    source = source or default_source(seq, radar)
+    cfg = config or ego_velocity_config(seq.calib.radar(radar))
+    track = run_ego_velocity(seq, radar, source, config=cfg, processing=processing, start=start,
+                             duration=duration, stride=stride, seed=seed, progress=progress)
+    traj = radar_inertial_odometry(track, seq.calib, orientation=orientation,
+                                   imu_timestamps=imu_t, imu_rates=imu_w, groundtruth=gt,
+                                   gyro_bias=bias, radar=radar)
+    info = {
+        "run": run_path(seq),
+        "run_name": seq.name,
+        "calib": str(getattr(seq.calib, "source", "preset")),
+        "radar": radar,
+        "source": source,
+        "orientation": orientation,
+        "frames": len(track),
+        "frames_ok": int(track.ok.sum()),
+        "start": start, "duration": duration, "stride": stride, "seed": seed,
+        "gyro_bias": None if bias is None else [float(b) for b in bias],
+        "initial_pose": "groundtruth" if gt is not None else "identity",
+        "config": asdict(cfg),
+        "processing": processing or {},
+        "coloradar_version": __version__,
+    }
+    comments = [f"run {seq.name}, {radar} radar, source {source}"]
+    folder.mkdir(parents=True, exist_ok=True)
+    write_velocity_table(targets[0], track, comments=comments, overwrite=overwrite)
+    write_tum(targets[1], traj, overwrite=overwrite, comments=[
+        *comments, f"world_T_base from radar ego-velocity + {orientation} attitude"])
+    atomic_write_text(targets[2], json.dumps(info, indent=2) + "\n")
+    return OdometryOutput(folder, track, traj, targets)

@@ -1,0 +1,97 @@
+"""The evaluation figure (needs matplotlib: ``pip install 'coloradar[viz]'``).
+
+Built on :class:`matplotlib.figure.Figure` with an Agg canvas, never ``pyplot``: no display
+needed and no global backend switched.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import OutputExistsError
+from ..formats.atomic import atomic_write_bytes
+
+try:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+except ImportError as exc:  # pragma: no cover - depends on the environment
+    raise ImportError("the odometry plot needs matplotlib: pip install 'coloradar[viz]'") from exc
+
+if TYPE_CHECKING:
+    from .evaluation import Evaluation
+
+__all__ = ["evaluation_figure", "plot_evaluation"]
+
+
+def evaluation_figure(ev: Evaluation) -> Figure:
+    """Four panels: top view of the aligned estimate and the ground truth, ATE over time,
+    ego-velocity against ground truth, RPE per distance."""
+    fig = Figure(figsize=(12.0, 8.0), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots(2, 2)
+    a = ev.ate
+    t0 = ev.reference.timestamps[0]
+    ref, est = ev.reference.translations, a.aligned.translations
+    ax[0, 0].plot(ref[:, 0], ref[:, 1], "k-", lw=1.5, label="ground truth")
+    ax[0, 0].plot(est[:, 0], est[:, 1], "-", color="tab:red", lw=1.0,
+                  label=f"estimate ({ev.info.get('align', 'se3')} aligned)")
+    ax[0, 0].plot(ref[:1, 0], ref[:1, 1], "ko", ms=4)
+    ax[0, 0].set(xlabel="x [m]", ylabel="y [m]", title="trajectory (top view)")
+    ax[0, 0].set_aspect("equal", adjustable="datalim")
+    ax[0, 0].legend(loc="best", fontsize=8)
+
+    ax[0, 1].plot(a.timestamps - t0, a.errors, color="tab:red", lw=1.0)
+    ax[0, 1].set(xlabel="time [s]", ylabel="position error [m]",
+                 title=f"ATE: RMSE {a.rmse:.3f} m ({a.rmse_percent:.2f} % of "
+                       f"{a.path_length:.1f} m)")
+    ax[0, 1].grid(alpha=0.3)
+
+    v = ev.velocity
+    if v is not None and v.timestamps.size:
+        for k, c in enumerate(("tab:blue", "tab:orange", "tab:green")):
+            ax[1, 0].plot(v.timestamps - t0, v.reference[:, k], "-", color=c, lw=1.5, alpha=0.5,
+                          label=f"v{'xyz'[k]} truth")
+            ax[1, 0].plot(v.timestamps - t0, v.estimate[:, k], ".", color=c, ms=3,
+                          label=f"v{'xyz'[k]} radar")
+        ax[1, 0].set(xlabel="time [s]", ylabel="velocity, radar frame [m/s]",
+                     title=f"ego-velocity: RMSE {v.rmse:.3f} m/s")
+        ax[1, 0].legend(loc="best", fontsize=7, ncol=3)
+    else:
+        ax[1, 0].plot(ev.reference.timestamps - t0, ref[:, 2], "k-", label="ground truth")
+        ax[1, 0].plot(a.timestamps - t0, est[:, 2], "-", color="tab:red", label="estimate")
+        ax[1, 0].set(xlabel="time [s]", ylabel="z [m]", title="height")
+        ax[1, 0].legend(loc="best", fontsize=8)
+    ax[1, 0].grid(alpha=0.3)
+
+    d = [r.distance for r in ev.rpe]
+    pct = [r.translation_percent for r in ev.rpe]
+    rot = [r.rotation_deg_per_m for r in ev.rpe]
+    x = np.arange(len(d))
+    ax[1, 1].bar(x - 0.2, pct, 0.4, color="tab:red", label="translation [%]")
+    ax[1, 1].bar(x + 0.2, rot, 0.4, color="tab:gray", label="rotation [deg/m]")
+    ax[1, 1].set_xticks(x, [f"{v:g} m" for v in d])
+    ax[1, 1].set(xlabel="segment length", title="RPE")
+    ax[1, 1].legend(loc="best", fontsize=8)
+    ax[1, 1].grid(alpha=0.3, axis="y")
+    name = ev.info.get("run_name", "")
+    if name:
+        fig.suptitle(f"{name}: {ev.info.get('radar', '')} radar odometry")
+    return fig
+
+
+def plot_evaluation(ev: Evaluation, path: str | os.PathLike[str], *,
+                    overwrite: bool = False) -> Path:
+    """Render :func:`evaluation_figure` to ``path`` (format from the suffix), atomically."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    fig = evaluation_figure(ev)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=path.suffix.lstrip(".").lower() or "png", dpi=fig.dpi)
+    atomic_write_bytes(path, buf.getvalue())
+    return path
