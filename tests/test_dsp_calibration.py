@@ -148,3 +148,25 @@ def test_real_coupling_file_removes_its_own_coupling(real_calib, name):
     after = RadarProcessor(calib).range_doppler_power(frame)
     assert before.max() > 1e3
     assert after.max() < 1e-9 * before.max()
+
+
+@pytest.mark.parametrize("name", ["cascade", "single_chip"])
+@pytest.mark.parametrize("window", ["hann", "blackman"])
+def test_physical_leakage_leaves_no_target_at_the_far_end(name, window):
+    """A real leakage is a near-range tone with sidelobes in every bin, also beyond the bins the
+    coupling file holds. Subtracting must not turn those into a static target at the last range
+    bins (a sharply truncated subtraction did: -1/4 of the first missing bin leaked into the
+    last kept one)."""
+    from coloradar.sim.radar import RADAR_MODELS, make_coupling
+
+    base = preset_radar(name)
+    leak, coupling = make_coupling(base, RADAR_MODELS[name], np.random.default_rng(0))
+    calib = replace(base, coupling=coupling)
+    frame = np.broadcast_to(leak[:, :, None, :], calib.frame_shape).astype(np.complex64)
+    kw = dict(range_window=window)
+    before = RadarProcessor(calib, coupling_subtraction=False, **kw).range_doppler_power(frame)
+    after = RadarProcessor(calib, **kw).range_doppler_power(frame)
+    assert after.max() < 0.15 * before.max()          # the leakage itself is removed
+    far = after.shape[1] // 2
+    # Beyond mid-range nothing above -70 dB of the leakage remains.
+    assert after[:, far:].max() < 1e-7 * before.max()

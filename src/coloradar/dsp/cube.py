@@ -92,7 +92,15 @@ def coupling_signal(coupling: CouplingCalib, num_samples: int) -> np.ndarray:
     """The time-domain coupling signal of every channel, one chirp long.
 
     Its unwindowed, unnormalised FFT (``np.fft.fft`` over ``num_samples``) equals the file's
-    bins ``0 … K−1`` and is zero on the bins the file does not hold.
+    bins ``0 … K−1`` up to ``3K/4`` and rolls off to zero (raised cosine) over the last quarter
+    of them; it is zero on the bins the file does not hold.
+
+    Why the roll-off: a real leakage is a near-range tone whose unwindowed spectrum has sinc
+    sidelobes in *every* bin, including those beyond ``K`` that the file does not hold. Cutting
+    the known spectrum sharply at ``K`` would leave a spectral edge there that the range window
+    spreads into the last kept bins (a strong static false target at the maximum range). Far
+    from the tone its sidelobes are what the range window suppresses anyway, so they are left
+    to it; coupling inside the first ``3K/4`` bins is removed exactly.
 
     Returns
     -------
@@ -101,8 +109,17 @@ def coupling_signal(coupling: CouplingCalib, num_samples: int) -> np.ndarray:
     """
     k = min(coupling.num_range_bins, num_samples)
     spec = np.zeros((*coupling.data.shape[:2], num_samples), dtype=np.complex128)
-    spec[..., :k] = coupling.data[..., :k]
+    spec[..., :k] = coupling.data[..., :k] * coupling_taper(k)
     return np.fft.ifft(spec, axis=-1)
+
+
+def coupling_taper(k: int) -> np.ndarray:
+    """float64 ``(k,)``: 1 up to bin ``3k/4``, then a raised-cosine roll-off to 0 at bin ``k``."""
+    start = (3 * k) // 4
+    taper = np.ones(k)
+    n = k - start
+    taper[start:] = 0.5 * (1.0 + np.cos(np.pi * (np.arange(n) + 1) / n))
+    return taper
 
 
 def range_fft(cube: np.ndarray, window: str = "hann", n: int | None = None,
