@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from coloradar.calib import preset_radar
-from coloradar.sim import builtin_scene, simulate_run, synthesize_adc, synthesize_adc_fast
+from coloradar.sim import builtin_scene, simulate_run, synthesize_adc
 from coloradar.sim.lidar import LidarModel
 from coloradar.sim.raycast import cast_rays
 
@@ -47,7 +47,7 @@ def bench_adc() -> None:
             v = rng.normal(size=(k, 3))
             a = rng.uniform(1, 100, k) * np.exp(1j * rng.uniform(0, 6, k))
             ref = _best(synthesize_adc, calib, p, v, a, repeat=2)
-            fast = _best(synthesize_adc_fast, calib, p, v, a)
+            fast = _best(synthesize_adc, calib, p, v, a, precision="single")
             print(f"  {radar:<12} K={k:<5}          {ref * 1e3:>10.0f}        {fast * 1e3:>10.0f}"
                   f"        {ref / fast:>5.1f}x")
 

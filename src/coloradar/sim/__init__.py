@@ -9,7 +9,6 @@ Quick start::
 See ``docs/simulator.md`` for the models, the scene file format and the truth file.
 """
 
-from .fast_if import synthesize_adc_fast
 from .imu import GRAVITY, ImuModel, simulate_imu
 from .lidar import LidarModel, column_times, simulate_scan
 from .paths import EllipsePath, LinePath, Sinusoids, path_from_dict
@@ -88,6 +87,5 @@ __all__ = [
     "simulated_calibration",
     "slow_times",
     "synthesize_adc",
-    "synthesize_adc_fast",
     "visible_targets",
 ]

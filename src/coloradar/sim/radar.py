@@ -9,7 +9,7 @@ Per frame (timestamp = start of the frame's first chirp):
 2. Each remaining scatterer gets a complex amplitude ``A·s·g(θ)·P(az, el)·e^{jϕ}``
    (:mod:`.scene`, ``P`` the two-way antenna pattern ``cos^pa(az)·cos^pe(el)``) and its
    velocity relative to the radar.
-3. :func:`.fast_if.synthesize_adc_fast` forms the IF frame (real TDM timing, free-space
+3. :func:`.radar_if.synthesize_adc` (single precision) forms the IF frame (real TDM timing, free-space
    ``1/R²``); the cascade's per-channel phase/frequency errors are imposed with
    :func:`.radar_if.apply_channel_errors` (the inverse of the calibration written to
    ``calib/cascade/phase_frequency_calib.txt``); the static coupling/leakage term (whose range
@@ -27,8 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from ..calib import CouplingCalib, PhaseFrequencyCalib, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
-from .fast_if import synthesize_adc_fast
-from .radar_if import apply_channel_errors
+from .radar_if import apply_channel_errors, synthesize_adc
 from .raycast import RectArrays, cast_rays
 from .scene import Scatterers
 
@@ -250,7 +249,8 @@ def radar_frame(calib: RadarCalib, model: RadarModel, targets: RadarTargets, *,
     numpy.ndarray
         complex64 ``(tx, rx, chirp, sample)`` [counts].
     """
-    frame = synthesize_adc_fast(calib, targets.position, targets.velocity, targets.amplitude)
+    frame = synthesize_adc(calib, targets.position, targets.velocity, targets.amplitude,
+                           precision="single")
     if channel_errors is not None:
         frame = apply_channel_errors(frame, channel_errors)
     if coupling_adc is not None:

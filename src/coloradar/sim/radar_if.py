@@ -13,7 +13,8 @@ with u the unit vector to the scatterer, p_tx/p_rx the antenna positions (y = az
 z = el·λd/2 at ``F_design``), vr > 0 receding, and f_c the carrier at mid-sampling. This is
 the narrowband far-field model: range migration within one frame (< 2 cm for |vr| < 2 m/s
 over a cascade frame) is neglected, so the signal factors into a beat term over samples and a
-phase term over (TX, RX, chirp), and the sum over scatterers is one complex matrix product.
+phase term over (TX, RX, chirp), and the sum over scatterers is one complex matrix product per
+block of scatterers.
 """
 
 from __future__ import annotations
@@ -34,17 +35,30 @@ def slow_times(calib: RadarCalib) -> np.ndarray:
     return (c[None, :] * w.num_tx + t[:, None]) * w.chirp_period
 
 
+def _cis(phase: np.ndarray, dtype) -> np.ndarray:
+    """``exp(j·phase)``; for complex64 the float64 phase is reduced modulo 2π before the cast,
+    so that carrier phases of tens of thousands of radians lose nothing in single precision."""
+    if dtype == np.complex128:
+        return np.exp(1j * phase)
+    p = np.mod(phase, 2.0 * np.pi).astype(np.float32)
+    out = np.empty(p.shape, dtype=np.complex64)
+    out.real = np.cos(p)
+    out.imag = np.sin(p)
+    return out
+
+
 def synthesize_adc(
     calib: RadarCalib,
     positions: np.ndarray,
     velocities: np.ndarray | None = None,
-    amplitudes: np.ndarray | float = 1.0,
+    amplitudes: np.ndarray | complex = 1.0,
     *,
     noise_std: float = 0.0,
     rng: np.random.Generator | int | None = None,
     azimuth_sign: float = 1.0,
     elevation_sign: float = 1.0,
-    chunk: int = 512,
+    precision: str = "double",
+    block: int = 1024,
 ) -> np.ndarray:
     """Synthesize one ADC frame of point scatterers (no quantisation, no channel errors).
 
@@ -59,7 +73,7 @@ def synthesize_adc(
         float ``(K, 3)``: scatterer velocity relative to the radar, in the radar frame [m/s];
         only its radial part matters. None = static.
     amplitudes
-        float ``(K,)`` or scalar: complex amplitude in ADC counts a scatterer would have at 1 m;
+        complex ``(K,)`` or scalar: amplitude in ADC counts a scatterer would have at 1 m;
         the frame carries ``a/R²`` (free-space two-way falloff).
     noise_std
         Standard deviation of the complex white noise per I and per Q component [counts].
@@ -68,7 +82,11 @@ def synthesize_adc(
     azimuth_sign, elevation_sign
         +1 when the antenna file's ``az`` (``el``) coordinate grows toward +y (+z), as the
         project assumes; -1 simulates a sensor mounted mirrored.
-    chunk
+    precision
+        ``"double"`` (complex128 arithmetic: the reference) or ``"single"`` (complex64
+        exponentials and matrix products, phases still formed in float64: agrees with
+        ``"double"`` to ~1e-5 relative and is several times faster for whole scenes).
+    block
         Scatterers per matrix product (bounds memory).
 
     Returns
@@ -76,41 +94,44 @@ def synthesize_adc(
     numpy.ndarray
         complex64 ``(tx, rx, chirp, sample)`` in ADC counts.
     """
+    if precision not in ("double", "single"):
+        raise ValueError(f"precision must be 'double' or 'single', got {precision!r}")
+    dtype = np.complex128 if precision == "double" else np.complex64
     w, ant = calib.waveform, calib.antenna
-    p = np.atleast_2d(np.asarray(positions, dtype=np.float64))
+    p = np.atleast_2d(np.asarray(positions, dtype=np.float64)).reshape(-1, 3)
     k = p.shape[0]
-    v = np.zeros_like(p) if velocities is None else np.atleast_2d(np.asarray(velocities, float))
+    v = (np.zeros_like(p) if velocities is None
+         else np.atleast_2d(np.asarray(velocities, dtype=np.float64)).reshape(-1, 3))
     a = np.broadcast_to(np.asarray(amplitudes, dtype=np.complex128), (k,))
     ntx, nrx, nc, ns = w.frame_shape
-    out = np.zeros((ntx * nrx * nc, ns), dtype=np.complex128)
-    t_n = w.adc_start_time + np.arange(ns) / w.sample_rate                      # (Ns,)
-    f_fast = w.start_frequency + w.slope * t_n                                   # (Ns,)
-    f_c = w.center_frequency
-    hw = ant.half_wavelength
+    out = np.zeros((ntx * nrx * nc, ns), dtype=dtype)
+    f_fast = w.start_frequency + w.slope * (w.adc_start_time + np.arange(ns) / w.sample_rate)
+    kfac = 2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT
     sign = np.array([azimuth_sign, elevation_sign])
-    tx_yz = ant.tx_positions * sign * hw                                          # (Ntx, 2)
-    rx_yz = ant.rx_positions * sign * hw                                          # (Nrx, 2)
+    tx_yz = ant.tx_positions * sign * ant.half_wavelength                         # (Ntx, 2)
+    rx_yz = ant.rx_positions * sign * ant.half_wavelength                         # (Nrx, 2)
     ts = slow_times(calib)                                                        # (Ntx, Nc)
-    for s in range(0, k, chunk):
-        pk, vk, ak = p[s:s + chunk], v[s:s + chunk], a[s:s + chunk]
+    buf = np.empty((min(block, max(k, 1)), ntx, nrx, nc), dtype=dtype)
+    for s in range(0, k, block):
+        pk, vk, ak = p[s:s + block], v[s:s + block], a[s:s + block]
+        m = len(pk)
         r = np.linalg.norm(pk, axis=1)
         if np.any(r <= 0):
             raise ValueError("a scatterer lies at the radar's origin")
         u = pk / r[:, None]
         vr = np.einsum("ij,ij->i", u, vk)
         tau0 = 2.0 * r / SPEED_OF_LIGHT
-        beat = np.exp(2j * np.pi * f_fast[None, :] * tau0[:, None])              # (K, Ns)
-        # Delay variation over TX, RX and chirp, relative to tau0.
-        d_tx = -(u[:, None, 1] * tx_yz[None, :, 0] + u[:, None, 2] * tx_yz[None, :, 1])  # (K,Ntx)
-        d_rx = -(u[:, None, 1] * rx_yz[None, :, 0] + u[:, None, 2] * rx_yz[None, :, 1])  # (K,Nrx)
-        d_dop = 2.0 * vr[:, None, None] * ts[None]                                 # (K,Ntx,Nc)
-        kfac = 2j * np.pi * f_c / SPEED_OF_LIGHT
-        # exp of a sum = product of exps: far fewer transcendental calls than one per element.
-        e_txc = np.exp(kfac * (d_tx[:, :, None] + d_dop))                          # (K,Ntx,Nc)
-        e_rx = np.exp(kfac * d_rx)                                                 # (K,Nrx)
-        phase = e_txc[:, :, None, :] * e_rx[:, None, :, None]                      # (K,Ntx,Nrx,Nc)
-        phase *= (ak / r**2)[:, None, None, None]
-        out += phase.reshape(len(r), -1).T @ beat
+        beat = _cis(2.0 * np.pi * tau0[:, None] * f_fast[None, :], dtype)          # (m, Ns)
+        # Path-length change over TX, RX and chirp relative to 2R; the phase term factors into
+        # (TX, chirp) and RX parts, so exponentials are taken on the small factors only.
+        d_tx = -(u[:, 1:2] * tx_yz[None, :, 0] + u[:, 2:3] * tx_yz[None, :, 1])   # (m, Ntx)
+        d_rx = -(u[:, 1:2] * rx_yz[None, :, 0] + u[:, 2:3] * rx_yz[None, :, 1])   # (m, Nrx)
+        e_txc = _cis(kfac * (d_tx[:, :, None] + 2.0 * vr[:, None, None] * ts[None]), dtype)
+        # The complex amplitude and the 1/R² falloff ride on the small RX factor.
+        e_rx = _cis(kfac * d_rx, dtype) * (ak / r**2).astype(dtype)[:, None]
+        ph = buf[:m]
+        np.multiply(e_txc[:, :, None, :], e_rx[:, None, :, None], out=ph)
+        out += ph.reshape(m, -1).T @ beat
     frame = out.reshape(ntx, nrx, nc, ns)
     if noise_std > 0:
         g = np.random.default_rng(rng)
