@@ -14,7 +14,7 @@ from coloradar.batch.run_processing import process_frames, process_run
 from coloradar.calib import load_calibration, parse_heatmap_cfg, preset_calibration, write_calibration
 from coloradar.cli.main import main
 from coloradar.dataset import open_sequence
-from coloradar.dsp import RadarProcessor
+from coloradar.dsp import ProcessingSettings, RadarProcessor
 from coloradar.errors import ColoradarError, OutputExistsError
 from coloradar.sim import synthesize_adc
 
@@ -82,19 +82,30 @@ def test_layout_ids_and_timestamps(run_dir, processed):
     np.testing.assert_array_equal(ts, seq.single_chip.adc.timestamps)
 
 
-def test_refuses_to_overwrite_unless_asked(run_dir, processed, capsys):
+def test_rerun_resumes_and_refuses_other_settings_unless_overwrite(run_dir, processed, capsys):
+    # Semantics since whole-dataset processing (issue 6): the same command again resumes
+    # (frames complete on disk are kept); output made with other settings is refused.
+    report = processed / "process_report.json"
     before = _snapshot(processed)
-    assert main(["process", str(run_dir), "--out", str(processed), "--quiet"]) == 1
-    assert "output exists" in capsys.readouterr().err
+    assert main(["process", str(run_dir), "--out", str(processed), "--quiet"]) == 0
+    assert "0 frames processed, 6 already complete" in capsys.readouterr().out
+    after = _snapshot(processed)
+    assert {p: t for p, t in after.items() if p != report} == {
+        p: t for p, t in before.items() if p != report}
+    before = _snapshot(processed)
+    assert main(["process", str(run_dir), "--out", str(processed), "--set", "pfa=1e-3",
+                 "--quiet"]) == 1
+    assert "other settings (pfa: 0.0001 -> 0.001)" in capsys.readouterr().err
     assert _snapshot(processed) == before
     with pytest.raises(OutputExistsError):
         process_run(run_dir, processed, radars="single_chip", products=["heatmaps"],
-                    progress=False)
+                    settings=ProcessingSettings(range_window="blackman"), progress=False)
+    assert _snapshot(processed) == before
     assert main(["process", str(run_dir), "--out", str(processed), "--radar", "single_chip",
                  "--products", "heatmaps", "--overwrite", "--quiet"]) == 0
     after = _snapshot(processed)
     changed = {p for p in after if after[p] != before.get(p)}
-    assert changed and all("single_chip/heatmaps" in p.as_posix() for p in changed)
+    assert changed and all("single_chip/heatmaps" in p.as_posix() for p in changed - {report})
 
 
 def test_never_writes_into_the_run(run_dir, capsys):

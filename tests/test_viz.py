@@ -278,7 +278,8 @@ def test_plot_and_animate_commands(run, tmp_path, capsys):
     assert main(["animate", str(run.location), "--out", str(gif), "--duration", "0.2",
                  "--fps", "5", "--dpi", "30", "--calib", calib]) == 0
     assert gif.stat().st_size > 0
-    assert "pictures 2/2" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "pictures [" in err and "2/2 frames" in err
 
 
 def test_rerun_recording(run, tmp_path):

@@ -3,19 +3,66 @@
 Work is a function applied to independent tasks (chunks of frames). Workers read their inputs
 and write their outputs themselves; only the small value each task returns travels back. At
 most ``max_in_flight`` tasks are submitted at once, so memory stays bounded whatever the
-number of tasks.
+number of tasks (the task iterable is consumed lazily).
+
+A task that raises, or whose worker process dies, does not stop the others: with
+``errors="return"`` it comes back as a :class:`TaskError` in place of its result.
+
+* :class:`LocalExecutor` starts its workers with the ``spawn`` method (no state inherited from
+  the caller, safe when the caller has threads) and replaces a pool broken by a dead worker
+  (out-of-memory killer, ``kill -9``): the tasks that were in flight are re-run one at a time,
+  so the task that kills its worker is identified and reported, and the others finish. Workers
+  exit by themselves when the process that started them dies.
+* :class:`DaskExecutor` relies on Dask's own rescheduling of the tasks of lost workers; a task
+  that keeps killing workers ends as ``KilledWorker``.
 """
 
 from __future__ import annotations
 
+import multiprocessing
 import os
+import signal
+import threading
+import time
+import warnings
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 from typing import Any
 
-from ..errors import ColoradarError
+from ..errors import CalibrationWarning, ColoradarError, DataWarning
 
-__all__ = ["DaskExecutor", "Executor", "LocalExecutor", "SerialExecutor", "make_executor"]
+__all__ = ["DaskExecutor", "Executor", "LocalExecutor", "SerialExecutor", "TaskError",
+           "make_executor"]
+
+_ERRORS = ("raise", "return")
+
+
+@dataclass(frozen=True)
+class TaskError:
+    """A task that raised or whose worker died, yielded in place of its result.
+
+    Attributes
+    ----------
+    error
+        Name of the exception type (``"FormatError"``, ``"WorkerDied"``, ``"KilledWorker"``).
+    message
+        Its message.
+    """
+
+    error: str
+    message: str
+
+    @classmethod
+    def from_exception(cls, exc: BaseException) -> TaskError:
+        return cls(type(exc).__name__, str(exc))
+
+
+def _check_errors(errors: str) -> None:
+    if errors not in _ERRORS:
+        raise ValueError(f"errors must be one of {_ERRORS}, got {errors!r}")
 
 
 class Executor:
@@ -25,7 +72,21 @@ class Executor:
     workers: int = 1
     description: str = "executor"
 
-    def imap_unordered(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[tuple[Any, Any]]:
+    def imap_unordered(self, fn: Callable[[Any], Any], tasks: Iterable[Any], *,
+                       errors: str = "raise") -> Iterator[tuple[Any, Any]]:
+        """Apply ``fn`` to every task, yielding ``(task, result)`` in completion order.
+
+        Parameters
+        ----------
+        fn
+            A module-level function (it is pickled by reference for process and cluster
+            workers).
+        tasks
+            Any iterable; consumed lazily, at most ``max_in_flight`` ahead of the results.
+        errors
+            ``"raise"``: an exception of a task is raised here; ``"return"``: it is yielded as
+            a :class:`TaskError` result and the other tasks go on.
+        """
         raise NotImplementedError
 
     def close(self) -> None:
@@ -43,13 +104,44 @@ class SerialExecutor(Executor):
 
     description = "serial (this process)"
 
-    def imap_unordered(self, fn, tasks):
+    def imap_unordered(self, fn, tasks, *, errors="raise"):
+        _check_errors(errors)
         for task in tasks:
-            yield task, fn(task)
+            try:
+                result = fn(task)
+            except Exception as exc:
+                if errors == "raise":
+                    raise
+                result = TaskError.from_exception(exc)
+            yield task, result
+
+
+def _watch_parent(parent_pid: int) -> None:
+    # A pool worker blocks on its task queue forever once its parent is gone (killed with
+    # SIGKILL, say); without this it would outlive the job and keep writing.
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+
+def _init_worker(parent_pid: int) -> None:
+    # Ctrl-C is the parent's to handle: it stops submitting, lets running tasks finish their
+    # files and writes its report; a worker interrupted mid-task would only lose that work.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True,
+                     name="coloradar-parent-watch").start()
+    # The parent opened the same data and has shown these once already.
+    warnings.simplefilter("ignore", DataWarning)
+    warnings.simplefilter("ignore", CalibrationWarning)
+
+
+class WorkerDied(ColoradarError):
+    """The worker process running a task died (killed, out of memory, crashed)."""
 
 
 class LocalExecutor(Executor):
-    """A local process pool (``concurrent.futures.ProcessPoolExecutor``).
+    """A local process pool (``concurrent.futures.ProcessPoolExecutor``, ``spawn`` start).
 
     Parameters
     ----------
@@ -60,33 +152,103 @@ class LocalExecutor(Executor):
     """
 
     def __init__(self, jobs: int | None = None, max_in_flight: int | None = None):
+        if jobs is not None and jobs < 1:
+            raise ColoradarError(f"the number of jobs must be at least 1, got {jobs}")
         self.workers = jobs or os.cpu_count() or 1
-        self.max_in_flight = max_in_flight or 2 * self.workers
+        self.max_in_flight = max(max_in_flight or 2 * self.workers, 1)
         self.description = f"local process pool, {self.workers} workers"
-        self._pool = ProcessPoolExecutor(max_workers=self.workers)
+        self.restarts = 0
+        self._pool = self._new_pool()
 
-    def imap_unordered(self, fn, tasks):
+    def _new_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=self.workers,
+                                   mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_init_worker, initargs=(os.getpid(),))
+
+    def _restart(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = self._new_pool()
+        self.restarts += 1
+
+    def imap_unordered(self, fn, tasks, *, errors="raise"):
+        _check_errors(errors)
         it = iter(tasks)
-        pending: dict = {}
-        for task in it:
-            pending[self._pool.submit(fn, task)] = task
-            if len(pending) >= self.max_in_flight:
-                break
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        none = object()
+        exhausted = False
+        pending: dict[Future, Any] = {}
+        # Tasks in flight when a worker died: re-run alone, so that the one that kills its
+        # worker is known (it fails) and the others complete.
+        suspects: deque = deque()
+        alone: Any = none
+        while True:
+            broken = False
+            if suspects:
+                if not pending:
+                    alone = suspects.popleft()
+                    broken = not self._submit(pending, fn, alone)
+                    if broken:
+                        suspects.appendleft(alone)
+                        alone = none
+            else:
+                alone = none
+                while not exhausted and len(pending) < self.max_in_flight:
+                    task = next(it, none)
+                    if task is none:
+                        exhausted = True
+                    elif not self._submit(pending, fn, task):
+                        suspects.append(task)   # never ran; the pool broke meanwhile
+                        broken = True
+                        break
+            if not pending and not broken:
+                return
+            if broken:
+                done = set(pending)
+                wait(done)
+            else:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                # After a worker death every other task in flight fails too: settle them now.
+                if any(isinstance(f.exception(), BrokenProcessPool) for f in done):
+                    broken = True
+                    done = set(pending)
+                    wait(done)
             for fut in done:
                 task = pending.pop(fut)
-                yield task, fut.result()
-                nxt = next(it, None)
-                if nxt is not None:
-                    pending[self._pool.submit(fn, nxt)] = nxt
+                exc = fut.exception()
+                if isinstance(exc, BrokenProcessPool):
+                    if task is not alone:
+                        suspects.append(task)
+                        continue
+                    exc = WorkerDied("the worker process running this task died (killed, out "
+                                     "of memory or crashed), also when re-run alone")
+                if exc is None:
+                    yield task, fut.result()
+                elif errors == "raise":
+                    raise exc
+                else:
+                    yield task, TaskError.from_exception(exc)
+            if broken:
+                self._restart()
+
+    def _submit(self, pending: dict, fn, task) -> bool:
+        try:
+            pending[self._pool.submit(fn, task)] = task
+        except BrokenProcessPool:
+            return False
+        return True
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
 
+def _malloc_trim_threshold() -> str | None:
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+
 class DaskExecutor(Executor):
     """Runs tasks on a Dask distributed cluster (optional extra ``coloradar[dask]``).
+
+    The workers must be able to import ``coloradar`` and to read and write the same paths as
+    this process (a shared file system).
 
     Parameters
     ----------
@@ -98,11 +260,15 @@ class DaskExecutor(Executor):
     client
         An existing ``distributed.Client`` (not closed by this executor).
     max_in_flight
-        Tasks submitted but not finished at any time (None: 2 × workers).
+        Tasks submitted but not finished at any time (None: 2 × worker threads, followed as
+        workers join or leave).
+    wait_for_workers
+        Seconds to wait for a first worker when the cluster has none yet.
     """
 
     def __init__(self, address: str | None = None, scheduler_file: str | None = None,
-                 client: Any = None, max_in_flight: int | None = None):
+                 client: Any = None, max_in_flight: int | None = None,
+                 wait_for_workers: float = 120.0):
         try:
             from distributed import Client
         except ImportError:
@@ -112,35 +278,78 @@ class DaskExecutor(Executor):
         if client is None:
             if address is None and scheduler_file is None:
                 raise ColoradarError("DaskExecutor needs a scheduler address or scheduler file")
-            client = Client(address=address, scheduler_file=scheduler_file)
+            if scheduler_file is not None and not os.path.isfile(scheduler_file):
+                raise ColoradarError(f"{scheduler_file}: scheduler file not found (start the "
+                                     "scheduler with dask scheduler --scheduler-file FILE)")
+            try:
+                client = Client(address=address, scheduler_file=scheduler_file, timeout="30s")
+            except OSError as exc:
+                raise ColoradarError(f"cannot reach the Dask scheduler "
+                                     f"{address or scheduler_file}: {exc}") from None
         self.client = client
-        nthreads = client.nthreads() if hasattr(client, "nthreads") else {}
-        self.workers = max(sum(nthreads.values()), 1) if nthreads else 1
-        self.max_in_flight = max_in_flight or 2 * self.workers
+        self._fixed_in_flight = max_in_flight
+        if not self._threads():
+            try:
+                client.wait_for_workers(1, timeout=wait_for_workers)
+            except Exception:
+                if self._own:
+                    client.close()
+                raise ColoradarError(f"no Dask worker joined the scheduler "
+                                     f"{client.scheduler.address} within {wait_for_workers:g} s "
+                                     "(start some with dask worker)") from None
+        self.workers = max(self._threads(), 1)
         self.description = f"dask cluster {client.scheduler.address}, {self.workers} worker threads"
+        try:
+            trims = {v for v in client.run(_malloc_trim_threshold).values() if v is not None}
+        except Exception:  # an old or restricted cluster: no advice then
+            trims = set()
+        if trims:
+            warnings.warn(
+                f"the Dask workers run with MALLOC_TRIM_THRESHOLD_={min(trims)} (the dask "
+                "nanny's default), which makes radar processing about 3x slower (every large "
+                "temporary array becomes a fresh mmap); start the workers with dask worker "
+                "--no-nanny, or see docs/batch.md", UserWarning, stacklevel=2)
 
-    def imap_unordered(self, fn, tasks):
+    def _threads(self) -> int:
+        return int(sum(self.client.nthreads().values()))
+
+    @property
+    def max_in_flight(self) -> int:
+        return self._fixed_in_flight or 2 * self.workers
+
+    def imap_unordered(self, fn, tasks, *, errors="raise"):
         from distributed import as_completed
 
+        _check_errors(errors)
         it = iter(tasks)
         owner: dict[str, Any] = {}
         ac = as_completed()
-        for task in it:
-            fut = self.client.submit(fn, task, pure=False)
-            owner[fut.key] = task
-            ac.add(fut)
-            if len(owner) >= self.max_in_flight:
-                break
-        for fut in ac:
+        sentinel = object()
+
+        def top_up() -> None:
+            while len(owner) < self.max_in_flight:
+                task = next(it, sentinel)
+                if task is sentinel:
+                    return
+                fut = self.client.submit(fn, task, pure=False)
+                owner[fut.key] = task
+                ac.add(fut)
+
+        top_up()
+        for n, fut in enumerate(ac, 1):
             task = owner.pop(fut.key)
-            result = fut.result()
-            fut.release()
+            try:
+                result = fut.result()
+            except Exception as exc:
+                if errors == "raise":
+                    raise
+                result = TaskError.from_exception(exc)
+            finally:
+                fut.release()
             yield task, result
-            nxt = next(it, None)
-            if nxt is not None:
-                f = self.client.submit(fn, nxt, pure=False)
-                owner[f.key] = nxt
-                ac.add(f)
+            if n % 16 == 0:  # follow workers joining or leaving (adaptive clusters)
+                self.workers = max(self._threads(), 1)
+            top_up()
 
     def close(self) -> None:
         if self._own:
@@ -150,9 +359,11 @@ class DaskExecutor(Executor):
 def make_executor(jobs: int | None = None, scheduler: str | None = None,
                   scheduler_file: str | None = None) -> Executor:
     """The executor a command line asks for: Dask when given a scheduler, else a local pool
-    (``jobs == 1``: serial in this process)."""
+    (``jobs == 1``: serial in this process; None: one worker per core)."""
     if scheduler or scheduler_file:
         return DaskExecutor(address=scheduler, scheduler_file=scheduler_file)
+    if jobs is not None and jobs < 1:
+        raise ColoradarError(f"the number of jobs must be at least 1, got {jobs}")
     if jobs == 1:
         return SerialExecutor()
     return LocalExecutor(jobs)

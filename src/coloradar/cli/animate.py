@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-from functools import partial
 from pathlib import Path
 
 from ..dataset import open_sequence
 from ..errors import OutputExistsError
-from ..geometry import print_progress
+from ..progress import Progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,11 +45,11 @@ def run(args: argparse.Namespace) -> int:
         from ..viz.rerun_log import log_run_rrd
 
         log_run_rrd(seq, out, start=args.start, duration=args.duration,
-                    overwrite=args.overwrite, progress=partial(print_progress, label="frames "))
+                    overwrite=args.overwrite, progress=Progress(0, "recording"))
         print(f"{out}: {seq.name} from {args.start:g} s (open with: rerun {out})")
         return 0
     animate_run(seq, out, start=args.start, duration=args.duration, fps=args.fps,
                 frame=args.coords, view=args.view, extent=args.extent, dpi=args.dpi,
-                overwrite=args.overwrite, progress=partial(print_progress, label="pictures "))
+                overwrite=args.overwrite, progress=Progress(0, "pictures"))
     print(f"{out}: {seq.name} from {args.start:g} s")
     return 0

@@ -31,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..demo import is_demo_output, run_demo
-    from .simulate import StageProgress
+    from ..progress import StageProgress
 
     out, overwrite = args.out, args.overwrite
     if out is None:

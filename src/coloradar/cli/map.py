@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from functools import partial
 from pathlib import Path
 
 from ..dataset import open_sequence
 from ..errors import OutputExistsError
-from ..geometry import MAP_SOURCES, build_map, print_progress, write_point_file
+from ..geometry import MAP_SOURCES, build_map, write_point_file
+from ..progress import Progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
                   voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,
                   min_range=args.min_range,
-                  progress=partial(print_progress, label=f"{args.sensor} frames "))
+                  progress=Progress(0, f"{args.sensor} frames"))
     write_point_file(out, m.points, m.fields, binary=not args.ascii, overwrite=args.overwrite)
     print(f"{out}: {len(m.points):,} points from {m.frame_indices.size} {args.sensor} frames "
           f"({', '.join(m.fields)}, world frame)", file=sys.stdout)

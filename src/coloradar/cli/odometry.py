@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-from functools import partial
 
 from ..dataset import open_sequence
-from ..geometry import print_progress
 from ..odometry import (
     ORIENTATION_SOURCES,
     SOURCES,
@@ -15,6 +13,7 @@ from ..odometry import (
     path_length,
     run_odometry,
 )
+from ..progress import Progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,9 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model != "auto":
         overrides["planar"] = args.model == "planar"
     cfg = ego_velocity_config(seq.calib.radar(args.radar), **overrides)
-    tty = getattr(sys.stderr, "isatty", lambda: False)()
-    progress = None if args.quiet or not tty else partial(print_progress,
-                                                          label=f"{args.radar} frames ")
+    progress = None if args.quiet else Progress(0, f"{args.radar} frames")
     res = run_odometry(seq, args.out, radar=args.radar, source=args.source,
                        orientation=args.orientation, config=cfg, start=args.start,
                        duration=args.duration, stride=args.stride, seed=args.seed,

@@ -1,10 +1,17 @@
-"""``coloradar process RUN --out OUT``: ADC frames → heatmaps and point clouds."""
+"""``coloradar process PATH --out OUT``: ADC frames of a run or a whole dataset → heatmaps and
+point clouds, on a local process pool or a Dask cluster, resumable."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import os
+import sys
 
-from ..batch.run_processing import PRODUCTS, process_run
+from ..batch.driver import DEFAULT_CHUNK_SIZE, process
+from ..batch.layout import PRODUCTS
+from ..dsp import ProcessingSettings
+from ..errors import ColoradarError
 
 
 def _frames(text: str) -> slice:
@@ -29,34 +36,127 @@ def _products(text: str) -> tuple[str, ...]:
     return prods
 
 
+def _names(text: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("expected comma-separated run names or patterns")
+    return names
+
+
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number ≥ 1, got {text!r}")
+    return n
+
+
+_SETTINGS = {f.name: f for f in dataclasses.fields(ProcessingSettings) if f.name != "workers"}
+
+
+def _setting(text: str) -> tuple[str, object]:
+    """``NAME=VALUE`` of a :class:`ProcessingSettings` field, VALUE parsed as its type."""
+    name, sep, value = text.partition("=")
+    name, value = name.strip(), value.strip()
+    if not sep or name not in _SETTINGS:
+        raise argparse.ArgumentTypeError(
+            f"expected NAME=VALUE with NAME one of {', '.join(_SETTINGS)}; got {text!r}")
+    default = _SETTINGS[name].default
+    try:
+        if value.lower() == "none" and default is None:
+            return name, None
+        if isinstance(default, bool):
+            if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError
+            return name, value.lower() in ("true", "1", "yes")
+        if isinstance(default, tuple):
+            return name, tuple(int(v) for v in value.split(","))
+        if isinstance(default, int) or default is None:
+            return name, int(value)
+        if isinstance(default, float):
+            return name, float(value)
+        return name, value
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{name}: cannot use {value!r} (default {default!r})") from None
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "process", help="process raw ADC frames into heatmaps and point clouds",
+        "process", help="process raw ADC frames (a run or a whole dataset) into heatmaps and "
+                        "point clouds",
         description="Run the radar processing chain (calibration, range/Doppler FFTs, TDM-MIMO "
-                    "compensation, angle FFT, CFAR) on a run's ADC frames and write heatmaps "
-                    "and point clouds in the dataset's layout under OUT/<radar>/, keeping each "
-                    "frame's number and timestamp. Never writes into RUN.")
-    p.add_argument("run", metavar="RUN", help="run folder or run .zip")
-    p.add_argument("--out", required=True, metavar="OUT", help="output folder (outside RUN)")
+                    "compensation, angle FFT, CFAR) on ADC frames and write heatmaps and point "
+                    "clouds in the dataset's layout, keeping each frame's number and timestamp. "
+                    "PATH is a run (folder or .zip): output in OUT/<radar>/; or a dataset root: "
+                    "each run's output in OUT/<run>/<radar>/. Work runs in chunks of frames on "
+                    "a local process pool (--jobs) or a Dask cluster (--scheduler). A rerun "
+                    "resumes: frames already complete are kept, the rest processed. Frames "
+                    "that fail are listed in OUT/process_report.json and the exit code is 1. "
+                    "Never writes into the input.")
+    p.add_argument("path", metavar="PATH", help="a run folder, a run .zip, or a dataset root")
+    p.add_argument("--out", required=True, metavar="OUT", help="output folder (outside the runs)")
+    p.add_argument("--runs", type=_names, metavar="NAMES",
+                   help="with a dataset root: comma-separated run names or shell patterns, "
+                        "e.g. '*hallways*' (default: every run)")
     p.add_argument("--calib", metavar="DIR",
-                   help="calib folder or calib.zip (default: found beside the run)")
+                   help="calib folder or calib.zip (default: found beside each run)")
     p.add_argument("--radar", choices=("cascade", "single_chip", "all"), default="all",
                    help="radar to process (default: every radar with ADC frames)")
     p.add_argument("--products", type=_products, default=PRODUCTS,
                    help="comma-separated: heatmaps,pointclouds (default: both)")
     p.add_argument("--frames", type=_frames, metavar="START:STOP",
-                   help="positions in the ADC stream to process, Python slice style "
+                   help="positions in each ADC stream to process, Python slice style "
                         "(default: all)")
-    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    p.add_argument("--set", dest="settings", type=_setting, action="append", default=[],
+                   metavar="NAME=VALUE",
+                   help="a processing setting (coloradar.dsp.ProcessingSettings), e.g. "
+                        "--set angle_method=capon --set pfa=1e-5; repeatable")
+    p.add_argument("--overwrite", action="store_true",
+                   help="delete the requested products' existing frame files and redo every "
+                        "frame (default: resume output made with the same settings; refuse "
+                        "output made otherwise)")
+    g = p.add_argument_group("where the work runs")
+    g.add_argument("--jobs", "-j", type=_positive, metavar="N",
+                   help="local worker processes (default: all cores, "
+                        f"{os.cpu_count()} here; 1: in this process)")
+    g.add_argument("--chunk-size", type=_positive, default=DEFAULT_CHUNK_SIZE, metavar="N",
+                   help=f"frames per task (default {DEFAULT_CHUNK_SIZE})")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on the Dask cluster of this scheduler (tcp://host:8786)")
+    g.add_argument("--scheduler-file", metavar="FILE",
+                   help="run on the Dask cluster whose scheduler wrote FILE "
+                        "(dask scheduler --scheduler-file FILE)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    report = process_run(args.run, args.out, calib=args.calib, radars=args.radar,
-                         products=args.products, frames=args.frames, overwrite=args.overwrite,
-                         progress=not args.quiet)
-    for radar, n in report.frames.items():
-        print(f"{radar}: {n} frames -> " + ", ".join(str(f) for f in report.folders[radar]))
-    print(f"done in {report.seconds:.1f} s")
-    return 0
+    from ..batch.executors import make_executor
+
+    if (args.scheduler or args.scheduler_file) and args.jobs is not None:
+        raise ColoradarError("--jobs sets the local pool; on a Dask cluster the workers "
+                             "(dask worker --nworkers/--nthreads) set the parallelism")
+    try:
+        settings = ProcessingSettings(**dict(args.settings)) if args.settings else None
+    except ValueError as exc:
+        raise ColoradarError(f"--set: {exc}") from None
+    executor = None
+    if args.scheduler or args.scheduler_file:
+        executor = make_executor(scheduler=args.scheduler, scheduler_file=args.scheduler_file)
+    try:
+        report = process(args.path, args.out, runs=args.runs, calib=args.calib,
+                         radars=args.radar, products=args.products, frames=args.frames,
+                         overwrite=args.overwrite, settings=settings, executor=executor,
+                         jobs=args.jobs, chunk_size=args.chunk_size, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print(f"interrupted: the frames written so far are kept; the same command resumes "
+              f"(report: {os.path.join(args.out, 'process_report.json')})", file=sys.stderr)
+        raise
+    finally:
+        if executor is not None:
+            executor.close()
+    print(report.summary())
+    return 0 if report.ok else 1

@@ -3,48 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import sys
-import time
 from pathlib import Path
 
 from ..errors import ColoradarError, OutputExistsError
+from ..progress import StageProgress
 
-__all__ = ["StageProgress", "register", "run"]
-
-
-class StageProgress:
-    """Progress of several concurrent stages on one stderr line (redrawn on a terminal,
-    a line every few seconds otherwise)."""
-
-    def __init__(self, label: str, stream=None, enabled: bool = True):
-        self.label = label
-        self.stream = stream or sys.stderr
-        self.enabled = enabled
-        self.stages: dict[str, tuple[int, int]] = {}
-        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self._last = 0.0
-        self._drawn = False
-        self._text = ""
-
-    def __call__(self, stage: str, done: int, total: int) -> None:
-        self.stages[stage] = (done, total)
-        now = time.monotonic()
-        finished = all(d >= t for d, t in self.stages.values())
-        if not self.enabled or (now - self._last < (0.2 if self._tty else 5.0) and not finished):
-            return
-        text = "  ".join(f"{s} {d}/{t}" for s, (d, t) in self.stages.items())
-        if text == self._text:
-            return
-        self._last, self._text = now, text
-        end = "" if self._tty else "\n"
-        print(f"\r{self.label}: {text}\033[K" if self._tty else f"{self.label}: {text}",
-              end=end, file=self.stream, flush=True)
-        self._drawn = True
-
-    def close(self) -> None:
-        """End the progress line."""
-        if self.enabled and self._drawn and self._tty:
-            print(file=self.stream)
+__all__ = ["register", "run"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

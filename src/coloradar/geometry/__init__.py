@@ -26,7 +26,6 @@ from .mapping import (
     PointMap,
     accumulate_clouds,
     build_map,
-    print_progress,
     voxel_downsample,
 )
 from .se3 import SE3, transform_points
@@ -48,7 +47,6 @@ __all__ = [
     "cloud_to_world",
     "default_fields",
     "nearest_indices",
-    "print_progress",
     "read_pcd",
     "read_ply",
     "read_point_file",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -14,7 +13,7 @@ from .se3 import SE3
 from .timesync import window_indices
 from .trajectory import Trajectory, trajectory_from_groundtruth
 
-__all__ = ["MAP_SOURCES", "PointMap", "accumulate_clouds", "build_map", "print_progress",
+__all__ = ["MAP_SOURCES", "PointMap", "accumulate_clouds", "build_map",
            "voxel_downsample"]
 
 MAP_SOURCES = {"lidar": ("lidar", "pointclouds"), "single_chip": ("single_chip", "pointclouds"),
@@ -193,9 +192,3 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
     from .cloud_io import default_fields
 
     return PointMap(pts, default_fields(pts.shape[1]), sensor, idx, ts[idx])
-
-
-def print_progress(done: int, total: int, label: str = "") -> None:
-    """A one-line progress counter on stderr (``label done/total``)."""
-    end = "\n" if done >= total else ""
-    print(f"\r{label}{done}/{total}", end=end, file=sys.stderr, flush=True)

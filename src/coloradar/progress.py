@@ -1,6 +1,9 @@
-"""A dependency-free progress line with rate and ETA, for long jobs.
+"""Dependency-free progress display for long jobs, shared by every command.
 
-On a terminal it redraws one line; otherwise (logs, CI) it prints a line at most every few
+:class:`Progress` is one bar with rate and ETA; :class:`StageProgress` shows several concurrent
+stages (e.g. a simulator's lidar, cascade and single-chip frames) on one line. Both are also
+callables ``progress(done, total)``, the callback signature the library's long functions take.
+On a terminal they redraw one line; otherwise (logs, CI) they print a line at most every few
 seconds, so that a redirected log stays readable.
 """
 
@@ -10,7 +13,7 @@ import sys
 import time
 from typing import TextIO
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "StageProgress"]
 
 
 def _fmt_time(s: float) -> str:
@@ -50,6 +53,8 @@ class Progress:
         self.failed = 0
         self.start = time.perf_counter()
         self._last = 0.0
+        self._shown: tuple[int, int] | None = None  # (done, failed) last drawn
+        self._ended = False
         self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self._interval = min_interval if self._tty else max(min_interval * 10, 2.0)
 
@@ -71,6 +76,11 @@ class Progress:
                 f"{rate:.1f} {self.unit}/s elapsed {_fmt_time(time.perf_counter() - self.start)} "
                 f"ETA {_fmt_time(eta)}{fail}")
 
+    def __call__(self, done: int, total: int) -> None:
+        """Callback form: ``done`` of ``total`` units are finished."""
+        self.total = max(int(total), 0)
+        self.update(int(done) - self.done)
+
     def update(self, n: int = 1, failed: int = 0) -> None:
         """Count ``n`` more units done (``failed`` of them failed) and redraw if due."""
         self.done += n
@@ -81,8 +91,12 @@ class Progress:
             self._write()
 
     def _write(self) -> None:
+        self._shown = (self.done, self.failed)
         if self._tty:
-            self.stream.write("\r" + self.line() + "\x1b[K")
+            # A finished bar ends its line itself: callers using the callback form never close.
+            end = "\n" if self.total and self.done >= self.total else ""
+            self.stream.write("\r" + self.line() + "\x1b[K" + end)
+            self._ended = bool(end)
         else:
             self.stream.write(self.line() + "\n")
         self.stream.flush()
@@ -90,8 +104,9 @@ class Progress:
     def close(self) -> None:
         """Draw the final state and end the line."""
         if self.enabled:
-            self._write()
-            if self._tty:
+            if self._shown != (self.done, self.failed):
+                self._write()
+            if self._tty and not self._ended:
                 self.stream.write("\n")
             self.stream.flush()
 
@@ -100,3 +115,38 @@ class Progress:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class StageProgress:
+    """Progress of several concurrent stages on one stderr line (redrawn on a terminal,
+    a line every few seconds otherwise)."""
+
+    def __init__(self, label: str, stream=None, enabled: bool = True):
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.stages: dict[str, tuple[int, int]] = {}
+        self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self._last = 0.0
+        self._drawn = False
+        self._text = ""
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        self.stages[stage] = (done, total)
+        now = time.monotonic()
+        finished = all(d >= t for d, t in self.stages.values())
+        if not self.enabled or (now - self._last < (0.2 if self._tty else 5.0) and not finished):
+            return
+        text = "  ".join(f"{s} {d}/{t}" for s, (d, t) in self.stages.items())
+        if text == self._text:
+            return
+        self._last, self._text = now, text
+        end = "" if self._tty else "\n"
+        print(f"\r{self.label}: {text}\033[K" if self._tty else f"{self.label}: {text}",
+              end=end, file=self.stream, flush=True)
+        self._drawn = True
+
+    def close(self) -> None:
+        """End the progress line."""
+        if self.enabled and self._drawn and self._tty:
+            print(file=self.stream)

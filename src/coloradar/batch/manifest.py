@@ -1,0 +1,173 @@
+"""What an output folder was made with, and who is writing it.
+
+``<out>/process_manifest.json`` records, per radar and product, the processing settings and a
+fingerprint of the radar calibration the frames there were computed with. A rerun with the
+same settings resumes (complete frames are kept); a rerun with different ones is refused
+unless ``overwrite`` — frames computed two ways never mix silently in one folder. An output
+folder without a manifest that already holds products (written by something else) is refused
+likewise.
+
+``<out>/.process.lock`` is held (``flock``) while a job writes a run's output, so that two
+jobs never write the same folder at once. The lock goes with the process: a killed job leaves
+no stale lock behind.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from .. import __version__
+from ..calib import (
+    RadarCalib,
+    format_antenna_cfg,
+    format_coupling_calib,
+    format_heatmap_cfg,
+    format_phase_frequency_calib,
+    format_waveform_cfg,
+)
+from ..dsp import ProcessingSettings
+from ..errors import OutputExistsError
+from ..formats import atomic_write_text
+
+try:  # POSIX; elsewhere jobs are not guarded against each other
+    import fcntl
+except ImportError:  # pragma: no cover
+    fcntl = None  # type: ignore[assignment]
+
+__all__ = [
+    "MANIFEST",
+    "OutputLock",
+    "calibration_fingerprint",
+    "read_manifest",
+    "settings_differences",
+    "settings_record",
+    "write_manifest",
+]
+
+MANIFEST = "process_manifest.json"
+LOCK = ".process.lock"
+FORMAT = "coloradar-process-manifest/1"
+# Settings that change how fast, not what, is computed.
+_NOT_OUTPUT = ("workers",)
+
+
+def calibration_fingerprint(calib: RadarCalib) -> str:
+    """SHA-256 of everything in a radar calibration that the processing reads."""
+    parts = [format_waveform_cfg(calib.waveform), format_antenna_cfg(calib.antenna, ""),
+             format_heatmap_cfg(calib.heatmap)]
+    if calib.coupling is not None:
+        parts.append(format_coupling_calib(calib.coupling))
+    if calib.phase_frequency is not None:
+        parts.append(format_phase_frequency_calib(calib.phase_frequency))
+    h = hashlib.sha256()
+    for p in parts:
+        h.update(p.encode())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def settings_record(settings: ProcessingSettings | None) -> dict[str, Any]:
+    """The settings that decide the output, as JSON values."""
+    s = settings or ProcessingSettings()
+    rec = {f.name: getattr(s, f.name) for f in dataclasses.fields(s) if f.name not in _NOT_OUTPUT}
+    return json.loads(json.dumps(rec))
+
+
+def settings_differences(stored: dict[str, Any], current: dict[str, Any]) -> list[str]:
+    """``"name: old -> new"`` for every setting that differs (a setting unknown to the file,
+    added by a later version, counts as its default)."""
+    defaults = settings_record(ProcessingSettings())
+    diff = []
+    for name in sorted(set(stored) | set(current)):
+        old = stored.get(name, defaults.get(name))
+        new = current.get(name, defaults.get(name))
+        if old != new:
+            diff.append(f"{name}: {old!r} -> {new!r}")
+    return diff
+
+
+def read_manifest(out: Path) -> dict[str, Any] | None:
+    """The manifest of an output folder, None when there is none.
+
+    Raises
+    ------
+    OutputExistsError
+        When the file is there but unreadable (it cannot vouch for the files beside it).
+    """
+    path = out / MANIFEST
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    try:
+        data = json.loads(text)
+        if data.get("format") != FORMAT or not isinstance(data.get("products"), dict):
+            raise ValueError(f"expected format {FORMAT!r} with a products table")
+    except (ValueError, AttributeError) as exc:
+        raise OutputExistsError(f"{path}: unreadable processing manifest ({exc}); pass "
+                                "overwrite=True (--overwrite) to replace this output") from None
+    return data
+
+
+def write_manifest(out: Path, run: str, entries: dict[str, dict[str, Any]]) -> None:
+    """Write (atomically, only when its content changes) the manifest with ``entries``:
+    ``"<radar>/<product>" -> {"settings": ..., "calibration_sha256": ...}``."""
+    text = json.dumps({"format": FORMAT, "run": run, "coloradar_version": __version__,
+                       "products": dict(sorted(entries.items()))}, indent=1) + "\n"
+    path = out / MANIFEST
+    try:
+        if path.read_text(encoding="utf-8") == text:
+            return
+    except FileNotFoundError:
+        pass
+    atomic_write_text(path, text)
+
+
+class OutputLock:
+    """An exclusive, non-blocking lock on an output folder, held while a job writes it.
+
+    Raises
+    ------
+    OutputExistsError
+        When another process holds it.
+    """
+
+    def __init__(self, out: Path):
+        self.path = out / LOCK
+        self._fd: int | None = None
+
+    def __enter__(self) -> OutputLock:
+        if fcntl is None:  # pragma: no cover
+            return self
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                raise OutputExistsError(f"{self.path.parent}: another coloradar process is "
+                                        "writing this output now; wait for it to finish") from None
+            # The file may have been removed by a job that just finished: lock the live one.
+            try:
+                same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                self._fd = fd
+                return self
+            os.close(fd)
+
+    def __exit__(self, *exc) -> None:
+        if self._fd is not None:
+            try:
+                self.path.unlink()
+            except FileNotFoundError:
+                pass
+            os.close(self._fd)
+            self._fd = None
