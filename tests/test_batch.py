@@ -220,6 +220,11 @@ def test_output_that_cannot_be_resumed_is_refused(dataset, reference, tmp_path):
     (out / "process_manifest.json").unlink()
     with pytest.raises(OutputExistsError, match="no entry in the manifest"):
         process_run(dataset / f"{RUN1}.zip", out, progress=False)
+    # ... and --overwrite does not delete them either (they may be a download's heatmaps).
+    before = _tree(out)
+    with pytest.raises(OutputExistsError, match="not deleting them"):
+        process_run(dataset / f"{RUN1}.zip", out, overwrite=True, progress=False)
+    assert _tree(out) == before
     # Another job writing the same folder.
     with OutputLock(tmp_path / "busy"), pytest.raises(OutputExistsError, match="another"):
         process_run(dataset / f"{RUN1}.zip", tmp_path / "busy", progress=False)

@@ -185,3 +185,20 @@ def test_malformed_waveform_and_coupling():
                                 "data:1,2,3,4,5,6\n", "coupling_calib.txt")
     with pytest.raises(cr.CalibrationError, match="not valid JSON"):
         cb.parse_phase_frequency_calib('{"antennaCalib": [', "phase_frequency_calib.txt")
+
+
+def test_nested_phase_matrices_and_zero_quaternion():
+    import json
+
+    f = [[51.0, 51.1], [51.2, 51.3]]
+    p = [[1.0, 0.0, 0.0, 1.0], [-1.0, 0.0, 0.0, -1.0]]  # [tx][rx re/im...]
+    text = json.dumps({"antennaCalib": {"numTx": 2, "numRx": 2, "frequencySlope": 7.9e13,
+                                        "samplingRate": 8e6, "frequencyCalibrationMatrix": f,
+                                        "phaseCalibrationMatrix": p}})
+    pf = cb.parse_phase_frequency_calib(text)
+    np.testing.assert_array_equal(pf.frequency, f)
+    np.testing.assert_array_equal(pf.phase, [[1, 1j], [-1, -1j]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an error, not a warning first
+        with pytest.raises(cr.CalibrationError, match=r"base_to_x\.txt: quaternion"):
+            cb.parse_transform("0 0 0\n0 0 0 0\n", "base_to_x.txt")

@@ -65,3 +65,12 @@ def test_wrong_frame_shape_is_a_format_error():
         proc.heatmap(bad)
     with pytest.raises(FormatError):
         proc.pointcloud(np.zeros(proc.calib.frame_shape, np.int16))
+
+
+def test_zero_padding_keeps_the_range_span_by_default():
+    calib = preset_radar("single_chip")
+    plain = RadarProcessor(calib)
+    padded = RadarProcessor(calib, range_fft_size=4 * calib.waveform.num_samples)
+    span = plain.num_range_bins * plain.range_bin_width
+    assert padded.num_range_bins * padded.range_bin_width == pytest.approx(span)
+    assert padded.heatmap_config().num_range_bins == 4 * calib.heatmap.num_range_bins

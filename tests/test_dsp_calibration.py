@@ -170,3 +170,41 @@ def test_physical_leakage_leaves_no_target_at_the_far_end(name, window):
     far = after.shape[1] // 2
     # Beyond mid-range nothing above -70 dB of the leakage remains.
     assert after[:, far:].max() < 1e-7 * before.max()
+
+
+def test_calibration_measured_on_a_reflector_undoes_physical_channel_delays():
+    """Independent of `apply_channel_errors`: channels get a physical extra delay δτ and a
+    complex gain, x'[n] = g·x[n]·exp(j2π(f0 + S·t_n)·δτ). A corner reflector capture (3 m,
+    boresight) gives each channel's bin f (the beat of τ_c + δτ) and response P (its DTFT
+    there), as a calibration would measure them. Calibrating a scene with those numbers must
+    leave every channel with the same residual factor as channel (0, 0)."""
+    from coloradar.calib.waveform import SPEED_OF_LIGHT as C0
+
+    calib = preset_radar("cascade")
+    w = calib.waveform
+    g = np.random.default_rng(11)
+    shape = (w.num_tx, w.num_rx)
+    delay = g.uniform(-0.3, 0.3, shape) * 2 / C0 * w.range_bin_width     # up to ±0.3 range bins
+    gain = g.uniform(0.5, 2.0, shape) * np.exp(2j * np.pi * g.random(shape))
+    t_n = w.adc_start_time + np.arange(w.num_samples) / w.sample_rate
+    channel = gain[:, :, None] * np.exp(2j * np.pi * (w.start_frequency + w.slope * t_n)
+                                        * delay[:, :, None])            # (tx, rx, sample)
+
+    reflector = synthesize_adc(calib, [[3.0, 0.0, 0.0]], None, 3e4)[:, :, 0, :] * channel
+    f = (2 * 3.0 / C0 + delay) * w.slope * w.num_samples / w.sample_rate  # its range bin
+    n = np.arange(w.num_samples)
+    p = np.einsum("trn,trn->tr", reflector, np.exp(-2j * np.pi * f[:, :, None] * n / w.num_samples))
+    pf = PhaseFrequencyCalib(f, p, w.slope, w.sample_rate)
+
+    pos = [[4.0, 1.5, 0.3], [2.0, -1.0, -0.2], [6.0, 0.5, 0.8]]
+    vel = [[0.3, 0.0, 0.0], [-0.5, 0.2, 0.0], [0.0, 0.0, 0.1]]
+    ideal = synthesize_adc(calib, pos, vel, [800.0, 300.0, 2000.0]).astype(np.complex128)
+    observed = ideal * channel[:, :, None, :]
+    fixed = apply_phase_frequency_calibration(observed.astype(np.complex64), pf, w)
+    ratio = fixed / ideal
+    np.testing.assert_allclose(ratio, np.broadcast_to(ratio[0, 0], ratio.shape), rtol=2e-3)
+    assert np.abs(ratio[0, 0] - 1).max() > 0.1  # the residual is a real, common factor
+    # The simulator's error model is the same physics, up to a factor common to all channels.
+    imposed = apply_channel_errors(ideal.astype(np.complex64), pf) / ideal
+    common = imposed / channel[:, :, None, :]
+    np.testing.assert_allclose(common, np.broadcast_to(common[0, 0], common.shape), rtol=2e-3)

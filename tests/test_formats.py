@@ -107,3 +107,10 @@ def test_atomic_write_leaves_no_partial_file(tmp_path):
         fm.atomic_write_bytes(target, object())  # type: ignore[arg-type]
     assert target.read_bytes() == b"old"
     assert sorted(p.name for p in target.parent.iterdir()) == ["x.bin"]
+
+
+def test_lines_of_wrong_length_are_caught_even_when_the_total_fits():
+    # 8 + 6 numbers = 2 x 7: a parser that only counts tokens would read two shifted poses.
+    text = "0 0 0 0 0 0 1 9\n1 2 3 0 0 1\n"
+    with pytest.raises(cr.FormatError, match=r"poses.txt, line 1: expected 7 numbers.*found 8"):
+        fm.parse_poses(text, "poses.txt")

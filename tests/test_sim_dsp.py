@@ -10,9 +10,6 @@ from coloradar.formats import decode_adc, encode_adc
 from coloradar.sim.radar import RADAR_MODELS, RadarTargets, radar_frame
 from coloradar.sim.run import simulated_calibration
 
-if not hasattr(dsp, "RadarProcessor"):  # pragma: no cover - during development
-    pytest.skip("coloradar.dsp has no RadarProcessor yet", allow_module_level=True)
-
 
 @pytest.fixture(scope="module")
 def rig():

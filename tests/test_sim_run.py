@@ -262,3 +262,20 @@ def test_bad_arguments_are_coloradar_errors(tmp_path):
         simulate_run(tmp_path, sensors=("radar",), duration=0.2)
     with pytest.raises(ColoradarError, match="motion"):
         simulate_run(tmp_path, motion="wild", duration=0.2)
+
+
+def test_a_real_calib_folder_is_never_replaced(tmp_path):
+    """--overwrite replaces the simulator's own output, never a calibration it did not write."""
+    from coloradar.calib import preset_calibration, write_calibration
+    from coloradar.errors import OutputExistsError
+    from coloradar.sim import simulate_run
+
+    write_calibration(preset_calibration(), tmp_path / "calib")  # stands for a real rig's calib
+    before = {p: p.read_bytes() for p in (tmp_path / "calib").rglob("*") if p.is_file()}
+    with pytest.raises(OutputExistsError, match="did not write"):
+        simulate_run(tmp_path, duration=0.5, sensors=["imu"], overwrite=True)
+    assert {p: p.read_bytes() for p in (tmp_path / "calib").rglob("*") if p.is_file()} == before
+    # The simulator's own calib folder may be replaced when asked.
+    simulate_run(tmp_path / "sim", duration=0.5, sensors=["imu"])
+    simulate_run(tmp_path / "sim", duration=0.5, sensors=["imu"], seed=3, board_seed=7,
+                 overwrite=True)

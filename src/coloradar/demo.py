@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ColoradarError, OutputExistsError
+from .errors import OutputExistsError
+from .formats.atomic import atomic_write_text
 
 __all__ = ["DemoReport", "RadarResult", "run_demo"]
 
@@ -204,29 +205,17 @@ def _process_radar(seq, truth, radar: str, out: Path, show_progress: bool
 def _pictures(seq, pictures: dict, folder: Path, overwrite: bool) -> tuple[list[Path], str]:
     """Range–azimuth image and detections-vs-truth view per radar, and a scene view."""
     try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        from matplotlib.figure import Figure
+        from matplotlib.figure import Figure  # a Figure needs no display and no backend
     except ImportError:
         return [], ("no pictures: matplotlib is not installed "
                     "(pip install 'coloradar[viz]')")
-    try:
-        from .viz import plot_range_azimuth, plot_scene, save_figure
-    except ImportError:
-        plot_range_azimuth = plot_scene = save_figure = None
+    from .viz import plot_range_azimuth, plot_scene, save_figure
+
     written: list[Path] = []
 
     def save(fig, name):
-        path = folder / name
-        if save_figure is not None:
-            save_figure(fig, path, overwrite=overwrite)
-        else:
-            if path.exists() and not overwrite:
-                raise OutputExistsError(f"{path}: exists; pass --overwrite to replace it")
-            folder.mkdir(parents=True, exist_ok=True)
-            fig.savefig(path, dpi=fig.dpi)
-        written.append(path)
+        save_figure(fig, folder / name, overwrite=overwrite)
+        written.append(folder / name)
 
     for radar, pic in pictures.items():
         if not pic:
@@ -236,18 +225,8 @@ def _pictures(seq, pictures: dict, folder: Path, overwrite: bool) -> tuple[list[
         title = f"{radar} range–azimuth, frame {pic['frame']} (max over elevation)"
         fig = Figure(figsize=(13, 5.5), dpi=100, layout="constrained")
         ax1, ax2 = fig.subplots(1, 2)
-        if plot_range_azimuth is not None:
-            plot_range_azimuth(power, cfg.range_bins, cfg.azimuth_bins, mode="polar", ax=ax1,
-                               title=title)
-        else:
-            db = 10 * np.log10(np.maximum(power.T, 1e-12))
-            im = ax1.imshow(db, origin="lower", aspect="auto", vmin=db.max() - 40,
-                            extent=(np.degrees(cfg.azimuth_bins[0]),
-                                    np.degrees(cfg.azimuth_bins[-1]), 0, cfg.range_bins[-1]))
-            ax1.set_xlabel("azimuth [deg] (+ = left)")
-            ax1.set_ylabel("range [m]")
-            ax1.set_title(title, fontsize="medium")
-            fig.colorbar(im, ax=ax1, label="power [dB]")
+        plot_range_azimuth(power, cfg.range_bins, cfg.azimuth_bins, mode="polar", ax=ax1,
+                           title=title)
         t, p = pic["truth"], pic["points"]
         ax2.scatter(t[:, 1], t[:, 0], s=2, c="0.7", label="truth scatterers seen")
         sc = ax2.scatter(p[:, 1], p[:, 0], s=10, c=p[:, 4], cmap="coolwarm",
@@ -261,12 +240,8 @@ def _pictures(seq, pictures: dict, folder: Path, overwrite: bool) -> tuple[list[
         ax2.set_title(f"{radar} detections vs truth, radar frame", fontsize="medium")
         ax2.legend(loc="upper right", fontsize="small")
         save(fig, f"{radar}_range_azimuth.png")
-    if plot_scene is not None:
-        try:
-            fig = plot_scene(seq, index=len(seq.cascade.adc) // 2, stream="cascade/adc")
-            save(fig, "scene.png")
-        except (ColoradarError, ValueError, KeyError):
-            pass  # a picture the visualisation cannot draw for this run is no reason to fail
+    fig = plot_scene(seq, index=len(seq.cascade.adc) // 2, stream="cascade/adc")
+    save(fig, "scene.png")
     return written, ""
 
 
@@ -324,7 +299,7 @@ def run_demo(out: str | os.PathLike[str] = "coloradar_demo", *, scene: str = "co
         report.ego.append(ego_velocity_report(seq, radar=radar, source=source, max_frames=None))
     if pictures:
         report.pictures, report.picture_note = _pictures(seq, pics, out / "pictures", overwrite)
-    (out / DEMO_MARKER).write_text("output of `coloradar demo`; a later demo may replace it\n")
+    atomic_write_text(out / DEMO_MARKER, "output of `coloradar demo`; a later demo may replace it\n")
     report.total_seconds = time.perf_counter() - t_start
     return report
 

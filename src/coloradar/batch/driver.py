@@ -112,7 +112,8 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-_RUN_PARTS = ("cascade/adc_samples", "single_chip/adc_samples", "lidar", "imu", "groundtruth")
+_RUN_PARTS = ("cascade/adc_samples", "single_chip/adc_samples", "lidar", "imu", "groundtruth",
+              "vicon")
 
 
 def _check_target(t: RunTarget) -> None:
@@ -217,9 +218,16 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
     folders = [out]
     for rj in job.radars:
         for p in prods:
-            if overwrite:
-                remove_product_output(out, rj.radar, p)
             folder, data = output_paths(out, rj.radar, p)
+            if overwrite:
+                if f"{rj.radar}/{p}" in entries:
+                    remove_product_output(out, rj.radar, p)
+                elif product_has_output(out, rj.radar, p):
+                    # Not recorded as ours (a downloaded dataset's heatmaps, say): never delete.
+                    raise OutputExistsError(
+                        f"{folder}: holds {p} that process_manifest.json does not record as "
+                        "made by coloradar; not deleting them, even with --overwrite: choose "
+                        "another output folder")
             data.mkdir(parents=True, exist_ok=True)
             folders += [folder, data]
             entries[f"{rj.radar}/{p}"] = {"settings": rj.settings_rec,

@@ -75,8 +75,9 @@ def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.tx
         root = json.loads(text)
         c = root["antennaCalib"]
         ntx, nrx = int(c["numTx"]), int(c["numRx"])
-        freq = np.asarray(c["frequencyCalibrationMatrix"], dtype=np.float64)
-        ph = np.asarray(c["phaseCalibrationMatrix"], dtype=np.float64)
+        # Flat lists in the real file; nested [tx][rx] lists are accepted too.
+        freq = np.asarray(c["frequencyCalibrationMatrix"], dtype=np.float64).ravel()
+        ph = np.asarray(c["phaseCalibrationMatrix"], dtype=np.float64).ravel()
         slope, fs = float(c["frequencySlope"]), float(c["samplingRate"])
     except json.JSONDecodeError as exc:
         raise CalibrationError(f"{name}: not valid JSON ({exc})") from None

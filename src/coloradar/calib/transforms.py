@@ -66,6 +66,8 @@ def parse_transform(text: str, name: str = "base_to_sensor.txt") -> Extrinsic:
     except ValueError:
         raise CalibrationError(f"{name}: expected numbers") from None
     n = float(np.linalg.norm(q))
+    if not np.isfinite(n) or n < 1e-6:
+        raise CalibrationError(f"{name}: quaternion {q.tolist()} has no direction")
     if abs(n - 1.0) > 1e-3:
         warnings.warn(f"{name}: quaternion norm is {n:.6f}; normalised", CalibrationWarning,
                       stacklevel=2)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from ..errors import CalibrationError, CalibrationWarning
 from ._parse import get_number, key_values
@@ -166,8 +166,3 @@ def parse_waveform_cfg(text: str, name: str = "waveform_cfg.txt") -> WaveformCon
 def format_waveform_cfg(w: WaveformConfig) -> str:
     """The dataset's ``waveform_cfg.txt`` text for ``w``."""
     return "".join(f"{key} {getattr(w, field)!r}\n" for key, (field, _) in _KEYS.items())
-
-
-def with_changes(w: WaveformConfig, **changes) -> WaveformConfig:
-    """A copy of ``w`` with some fields changed."""
-    return replace(w, **changes)

@@ -16,6 +16,7 @@ from scipy.ndimage import maximum_filter
 
 from ..calib import HeatmapConfig
 from ..errors import FormatError
+from .array import sines_to_unit
 from .cfar import cfar
 
 __all__ = ["Detections", "heatmap_pointcloud", "local_maxima"]
@@ -125,19 +126,12 @@ def heatmap_pointcloud(heatmap: np.ndarray, config: HeatmapConfig, *, kind: str 
         mask &= local_maxima(p, "mirror")
     mask[:, :, : int(np.ceil(min_range / config.range_bin_width))] = False
     e, a, r = np.nonzero(mask)
-    u_z = np.sin(config.elevation_bins[e])
-    u_y = np.sin(config.azimuth_bins[a])
-    # Corner cells of the grid lie outside the visible region (u_y² + u_z² > 1): project them
-    # onto its edge so that every point keeps its range.
-    s2 = u_y**2 + u_z**2
-    scale = 1.0 / np.sqrt(np.maximum(s2, 1.0))
-    u_y, u_z = u_y * scale, u_z * scale
-    u_x = np.sqrt(np.clip(1.0 - s2 * scale**2, 0.0, None))
+    # Corner cells of the grid lie outside the visible region (u_y² + u_z² > 1); sines_to_unit
+    # projects them onto its edge so that every point keeps its range.
+    u = sines_to_unit(np.sin(config.azimuth_bins[a]), np.sin(config.elevation_bins[e]))
     rng = r * config.range_bin_width
     out = np.empty((e.size, 5), dtype=np.float32)
-    out[:, 0] = rng * u_x
-    out[:, 1] = rng * u_y
-    out[:, 2] = rng * u_z
+    out[:, :3] = rng[:, None] * u
     out[:, 3] = hm[e, a, r, 0]
     out[:, 4] = hm[e, a, r, 1]
     return out

@@ -50,7 +50,8 @@ class ProcessingSettings:
     range_fft_size, doppler_fft_size
         FFT lengths (≥ samples / chirp loops; larger = zero padding); None = no padding.
     num_range_bins
-        Range bins kept (heatmap and detection); None = the heatmap_cfg's.
+        Range bins kept (heatmap and detection); None = the heatmap_cfg's range span
+        (its bin count times the zero-padding factor).
     dc_removal
         Subtract each chirp's mean before anything else.
     phase_frequency_calibration
@@ -158,7 +159,10 @@ class RadarProcessor:
         ntx, nrx, nc, ns = w.frame_shape
         self.range_fft_size = int(s.range_fft_size or ns)
         self.doppler_fft_size = int(s.doppler_fft_size or nc)
-        self.num_range_bins = int(s.num_range_bins or hm.num_range_bins)
+        # Default: the heatmap grid's range span, whatever the zero padding (padding refines
+        # the bins, it must not shorten the range covered).
+        self.num_range_bins = int(s.num_range_bins
+                                  or -(-hm.num_range_bins * self.range_fft_size // ns))
         if self.range_fft_size < ns or self.doppler_fft_size < nc:
             raise ValueError(f"FFT sizes must be at least {ns} samples and {nc} chirp loops")
         if not 0 < self.num_range_bins <= self.range_fft_size:

@@ -221,8 +221,16 @@ def _calib_texts(calib: Calibration) -> dict[str, str]:
     return out
 
 
+SIM_CALIB_MARKER = "SIMULATED_CALIBRATION.txt"
+"""File that marks a calib folder as written by the simulator (the only kind it may replace)."""
+
+
 def _write_calib(calib: Calibration, folder: Path, overwrite: bool) -> None:
-    """Write the calib folder, or check that the one there is the same."""
+    """Write the calib folder, or check that the one there is the same.
+
+    A calib folder that the simulator did not write (a real dataset's, say) is never replaced,
+    whatever ``overwrite`` says.
+    """
     texts = _calib_texts(calib)
     if folder.exists():
         differ = [rel for rel, text in texts.items()
@@ -230,12 +238,19 @@ def _write_calib(calib: Calibration, folder: Path, overwrite: bool) -> None:
                   or (folder / rel).read_text(encoding="utf-8") != text]
         if not differ:
             return
+        if not (folder / SIM_CALIB_MARKER).is_file():
+            raise OutputExistsError(
+                f"{folder}: a calib folder that the simulator did not write is there and differs "
+                f"from this simulation's ({', '.join(differ[:3])}{'…' if len(differ) > 3 else ''});"
+                " not replacing it: write the simulation to another folder")
         if not overwrite:
             raise OutputExistsError(
                 f"{folder}: a calib folder is there that differs from this simulation's "
                 f"({', '.join(differ[:3])}{'…' if len(differ) > 3 else ''}); pass "
                 "overwrite=True (--overwrite) to replace it, or write to another folder")
     write_calibration(calib, folder)
+    atomic_write_text(folder / SIM_CALIB_MARKER,
+                      "written by coloradar simulate: simulated sensors, not a real rig's calibration\n")
 
 
 def _stream_times(rate: float, duration: float, busy: float, jitter: float,
