@@ -4,14 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._arrays import readonly  # noqa: F401  (re-exported for the calib modules)
 from ..errors import CalibrationError
-
-
-def readonly(a: np.ndarray) -> np.ndarray:
-    """Return ``a`` marked read-only, so frozen configs cannot be mutated through their arrays."""
-    a = np.ascontiguousarray(a)
-    a.flags.writeable = False
-    return a
 
 
 def strip_comment(line: str) -> str:

@@ -4,7 +4,6 @@ point clouds, on a local process pool or a Dask cluster, resumable."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 
@@ -53,34 +52,12 @@ def _positive(text: str) -> int:
     return n
 
 
-_SETTINGS = {f.name: f for f in dataclasses.fields(ProcessingSettings) if f.name != "workers"}
-
-
 def _setting(text: str) -> tuple[str, object]:
-    """``NAME=VALUE`` of a :class:`ProcessingSettings` field, VALUE parsed as its type."""
-    name, sep, value = text.partition("=")
-    name, value = name.strip(), value.strip()
-    if not sep or name not in _SETTINGS:
-        raise argparse.ArgumentTypeError(
-            f"expected NAME=VALUE with NAME one of {', '.join(_SETTINGS)}; got {text!r}")
-    default = _SETTINGS[name].default
+    """``--set NAME=VALUE``, parsed by :meth:`ProcessingSettings.parse_setting`."""
     try:
-        if value.lower() == "none" and default is None:
-            return name, None
-        if isinstance(default, bool):
-            if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                raise ValueError
-            return name, value.lower() in ("true", "1", "yes")
-        if isinstance(default, tuple):
-            return name, tuple(int(v) for v in value.split(","))
-        if isinstance(default, int) or default is None:
-            return name, int(value)
-        if isinstance(default, float):
-            return name, float(value)
-        return name, value
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{name}: cannot use {value!r} (default {default!r})") from None
+        return ProcessingSettings.parse_setting(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -74,6 +74,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"  truth: {res.run_path / 'truth'}")
     for key, n in res.counts.items():
         print(f"  {key:<24} {n:>6}")
-    if not res.heatmaps:
-        print("  (no heatmaps: coloradar.dsp not available or --no-heatmaps)")
+    if args.no_heatmaps:
+        print("  (no heatmaps: --no-heatmaps)")
     return 0

@@ -132,6 +132,44 @@ class ProcessingSettings:
         """A copy with some settings changed (unknown names raise ``TypeError``)."""
         return replace(self, **changes)
 
+    @classmethod
+    def parse_setting(cls, text: str) -> tuple[str, object]:
+        """``NAME=VALUE`` (as given on a command line) as a field name and a typed value.
+
+        The value is read as the type of the field's default: ``true``/``false`` for flags,
+        comma-separated integers for tuples (``2,8``), ``none`` where the default is None.
+        ``workers`` is not settable this way (executors decide it).
+
+        Raises
+        ------
+        ValueError
+            Unknown name, missing ``=``, or a value of the wrong type.
+        """
+        names = [f.name for f in fields(cls) if f.name != "workers"]
+        defaults = {f.name: f.default for f in fields(cls)}
+        name, sep, value = text.partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or name not in names:
+            raise ValueError(f"expected NAME=VALUE with NAME one of {', '.join(names)}; "
+                             f"got {text!r}")
+        default = defaults[name]
+        try:
+            if value.lower() == "none" and default is None:
+                return name, None
+            if isinstance(default, bool):
+                if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError
+                return name, value.lower() in ("true", "1", "yes")
+            if isinstance(default, tuple):
+                return name, tuple(int(v) for v in value.split(","))
+            if isinstance(default, int) or default is None:
+                return name, int(value)
+            if isinstance(default, float):
+                return name, float(value)
+            return name, value
+        except ValueError:
+            raise ValueError(f"{name}: cannot use {value!r} (default {default!r})") from None
+
 
 class RadarProcessor:
     """ADC frames of one radar → range–Doppler cubes, heatmaps, detections, point clouds.

@@ -14,16 +14,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .._arrays import readonly
+
 if TYPE_CHECKING:
     from ..calib import Extrinsic
     from .trajectory import Trajectory
 
 __all__ = ["SE3", "transform_points"]
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a.flags.writeable = False
-    return a
 
 
 def rotate(rotation: Rotation, vectors: np.ndarray) -> np.ndarray:
@@ -84,7 +81,7 @@ class SE3:
         t = np.array(self.translation, dtype=np.float64).reshape(-1)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise ValueError(f"SE3.translation must be 3 finite numbers, got {t!r}")
-        object.__setattr__(self, "translation", _readonly(t))
+        object.__setattr__(self, "translation", readonly(t))
 
     # -- construction -------------------------------------------------------------------------
     @classmethod

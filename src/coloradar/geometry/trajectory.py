@@ -15,15 +15,11 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from .._arrays import readonly
 from ..errors import DataWarning, ExtrapolationError, FormatError
 from .se3 import SE3, rotate
 
 __all__ = ["ExtrapolationError", "Trajectory", "trajectory_from_groundtruth"]
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,8 +59,8 @@ class Trajectory:
         if np.any(np.diff(t) <= 0):
             raise FormatError(f"{self.name}: timestamps must be strictly increasing "
                               "(use Trajectory.from_poses to sort and drop duplicates)")
-        object.__setattr__(self, "timestamps", _readonly(t))
-        object.__setattr__(self, "translations", _readonly(p))
+        object.__setattr__(self, "timestamps", readonly(t))
+        object.__setattr__(self, "translations", readonly(p))
         object.__setattr__(self, "rotations", r)
 
     # -- construction -------------------------------------------------------------------------
@@ -198,7 +194,17 @@ class Trajectory:
         # Times relative to the first knot: Slerp divides differences of Unix times otherwise.
         return Slerp(self.timestamps - self.timestamps[0], self.rotations)
 
-    def _check_span(self, t: np.ndarray, tolerance: float) -> np.ndarray:
+    def check_span(self, t: np.ndarray, tolerance: float) -> np.ndarray:
+        """``t`` clipped to the trajectory's span; :class:`ExtrapolationError` when some time
+        lies more than ``tolerance`` [s] outside it (or is not finite).
+
+        Parameters
+        ----------
+        t
+            float64 ``(N,)`` times [s].
+        tolerance
+            Allowed distance outside the span [s].
+        """
         lo, hi = self.start - tolerance, self.end + tolerance
         outside = (t < lo) | (t > hi) | ~np.isfinite(t)
         if np.any(outside):
@@ -241,7 +247,7 @@ class Trajectory:
     def interpolate_arrays(self, times: np.ndarray,
                            tolerance: float = 0.0) -> tuple[np.ndarray, Rotation]:
         """Like :meth:`interpolate`, for times in any order: float64 ``(M, 3)`` and a Rotation."""
-        t = self._check_span(np.asarray(times, dtype=np.float64).reshape(-1), tolerance)
+        t = self.check_span(np.asarray(times, dtype=np.float64).reshape(-1), tolerance)
         if len(self) == 1:
             zeros = np.zeros(t.size, dtype=np.intp)
             return self.translations[zeros], self.rotations[zeros]

@@ -96,7 +96,7 @@ def rig_velocity(trajectory: Trajectory, times: np.ndarray, *,
     h = float(np.median(np.diff(trajectory.timestamps))) if half_window is None else half_window
     if not h > 0:
         raise ValueError(f"rig_velocity: half_window must be positive, got {h}")
-    trajectory._check_span(t, 0.0)
+    trajectory.check_span(t, 0.0)
     ta = np.maximum(t - h, trajectory.start)
     tb = np.minimum(t + h, trajectory.end)
     dt = (tb - ta)[:, None]
