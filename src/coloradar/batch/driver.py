@@ -34,7 +34,8 @@ from ..dataset import FrameStream, find_runs, open_sequence
 from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError, MissingDataError, OutputExistsError
-from ..formats import atomic_write_text, heatmap_nbytes
+from ..formats import heatmap_nbytes
+from ..formats.atomic import write_text_if_changed
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, make_executor
@@ -242,15 +243,6 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
         rj.outcome.skipped = len(rj.positions) - len(rj.todo)
 
 
-def _write_if_changed(path: Path, text: str) -> None:
-    try:
-        if path.read_text(encoding="utf-8") == text:
-            return
-    except FileNotFoundError:
-        pass
-    atomic_write_text(path, text)
-
-
 def _finish_radar(job: _RunJob, rj: _RadarJob, prods: tuple[str, ...]) -> None:
     """A radar's chunks are all back: settle lost chunks from the disk, write timestamps."""
     out = job.target.out
@@ -269,8 +261,8 @@ def _finish_radar(job: _RunJob, rj: _RadarJob, prods: tuple[str, ...]) -> None:
         folder = output_paths(out, rj.radar, p)[0]
         written = np.array(sorted(valid[p] & known), dtype=np.int64)
         if p == "heatmaps":
-            _write_if_changed(folder / "heatmap_cfg.txt", rj.heatmap_cfg)
-        _write_if_changed(folder / "timestamps.txt",
+            write_text_if_changed(folder / "heatmap_cfg.txt", rj.heatmap_cfg)
+        write_text_if_changed(folder / "timestamps.txt",
                           timestamps_text(ids, np.asarray(rj.stream.timestamps), written))
 
 

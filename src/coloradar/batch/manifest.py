@@ -32,7 +32,7 @@ from ..calib import (
 )
 from ..dsp import ProcessingSettings
 from ..errors import OutputExistsError
-from ..formats import atomic_write_text
+from ..formats.atomic import write_text_if_changed
 
 try:  # POSIX; elsewhere jobs are not guarded against each other
     import fcntl
@@ -119,13 +119,7 @@ def write_manifest(out: Path, run: str, entries: dict[str, dict[str, Any]]) -> N
     ``"<radar>/<product>" -> {"settings": ..., "calibration_sha256": ...}``."""
     text = json.dumps({"format": FORMAT, "run": run, "coloradar_version": __version__,
                        "products": dict(sorted(entries.items()))}, indent=1) + "\n"
-    path = out / MANIFEST
-    try:
-        if path.read_text(encoding="utf-8") == text:
-            return
-    except FileNotFoundError:
-        pass
-    atomic_write_text(path, text)
+    write_text_if_changed(out / MANIFEST, text)
 
 
 class OutputLock:

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..dataset import open_sequence
-from ..errors import OutputExistsError
 from ..progress import Progress
+from ._common import add_file_output_args, new_output_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,17 +28,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--view", default="bev", choices=("bev", "3d"), help="bird's-eye or 3-D")
     p.add_argument("--extent", type=float, default=20.0, help="half-width of the view [m]")
     p.add_argument("--dpi", type=int, default=100, help="resolution (default 100: 800x720 px)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
-    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    add_file_output_args(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..viz import animate_run
 
-    out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise OutputExistsError(f"{out}: exists; pass --overwrite to replace it")
+    out = new_output_file(args.out, args.overwrite)
     seq = open_sequence(args.run, calib=args.calib)
     if out.suffix.lower() == ".rrd":
         from ..viz.rerun_log import log_run_rrd

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from ..dataset import open_sequence
-from ..errors import OutputExistsError
 from ..geometry import MAP_SOURCES, build_map, write_point_file
 from ..progress import Progress
+from ._common import add_file_output_args, new_output_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,15 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="drop points closer to the sensor than this [m] (the rig itself)")
     p.add_argument("--max-range", type=float, help="drop points farther than this [m]")
     p.add_argument("--ascii", action="store_true", help="write ascii instead of binary")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
-    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    add_file_output_args(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise OutputExistsError(f"{out}: exists; pass --overwrite to replace it")
+    out = new_output_file(args.out, args.overwrite)
     seq = open_sequence(args.run, calib=args.calib)
     m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
                   voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,

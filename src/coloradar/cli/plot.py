@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ..errors import OutputExistsError
+from ._common import add_file_output_args, new_output_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,17 +36,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    choices=("azimuth-range", "elevation-azimuth"), help="heatmap slice")
     p.add_argument("--max-range", type=float, help="clip the range axis [m]")
     p.add_argument("--dpi", type=int, default=100, help="image resolution (default 100)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing output file")
-    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    add_file_output_args(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..viz import frame_figure, save_figure
 
-    out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise OutputExistsError(f"{out}: exists; pass --overwrite to replace it")
+    out = new_output_file(args.out, args.overwrite)
     seq = open_sequence(args.run, calib=args.calib)
     fig = frame_figure(seq, args.view, args.frame, radar=args.radar, coords=args.coords,
                        scene_view=args.scene_view, stream=args.stream, extent=args.extent,

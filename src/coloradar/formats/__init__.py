@@ -1,6 +1,6 @@
 """Bytes <-> arrays for every ColoRadar file kind, with size checks, and folder/zip sources."""
 
-from .atomic import atomic_write_bytes, atomic_write_text
+from .atomic import atomic_write_bytes, atomic_write_text, write_text_if_changed
 from .binary import (
     LIDAR_POINT_FIELDS,
     RADAR_POINT_FIELDS,
@@ -71,5 +71,6 @@ __all__ = [
     "write_lidar_pointcloud",
     "write_poses",
     "write_radar_pointcloud",
+    "write_text_if_changed",
     "write_timestamps",
 ]

@@ -6,7 +6,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode", "write_text_if_changed"]
 
 
 def _read_umask() -> int:
@@ -51,3 +51,15 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes | memoryview) -
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """:func:`atomic_write_bytes` for UTF-8 text."""
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def write_text_if_changed(path: str | os.PathLike[str], text: str) -> bool:
+    """:func:`atomic_write_text`, skipped when ``path`` already holds ``text`` (keeps its
+    modification time, which resumable jobs rely on). Returns whether it wrote."""
+    try:
+        if Path(path).read_text(encoding="utf-8") == text:
+            return False
+    except FileNotFoundError:
+        pass
+    atomic_write_text(path, text)
+    return True
