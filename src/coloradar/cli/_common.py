@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import OutputExistsError
+from ..formats.atomic import new_output_path
 
 
 def add_file_output_args(p: argparse.ArgumentParser) -> None:
@@ -15,8 +15,6 @@ def add_file_output_args(p: argparse.ArgumentParser) -> None:
 
 
 def new_output_file(out: str, overwrite: bool) -> Path:
-    """``out`` as a path, refusing an existing file unless ``overwrite``."""
-    path = Path(out)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; pass --overwrite to replace it")
-    return path
+    """``out`` as a path, refusing an existing file unless ``overwrite`` (checked before any
+    input is read, so that a long command fails at once)."""
+    return new_output_path(out, overwrite)

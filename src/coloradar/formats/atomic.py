@@ -6,7 +6,10 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode", "write_text_if_changed"]
+from ..errors import OutputExistsError
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode", "new_output_path",
+           "write_text_if_changed"]
 
 
 def _read_umask() -> int:
@@ -63,3 +66,12 @@ def write_text_if_changed(path: str | os.PathLike[str], text: str) -> bool:
         pass
     atomic_write_text(path, text)
     return True
+
+
+def new_output_path(path: str | os.PathLike[str], overwrite: bool = False) -> Path:
+    """``path`` as a :class:`~pathlib.Path` for a file about to be written; raises
+    :class:`~coloradar.OutputExistsError` when it exists and ``overwrite`` is not set."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    return path

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, OutputExistsError
-from ..formats.atomic import atomic_write_bytes
+from ..errors import FormatError
+from ..formats.atomic import atomic_write_bytes, new_output_path
 
 __all__ = ["default_fields", "read_pcd", "read_ply", "read_point_file", "write_pcd",
            "write_ply", "write_point_file"]
@@ -39,9 +39,7 @@ def default_fields(ncols: int) -> tuple[str, ...]:
 def _prepare(path: str | os.PathLike[str], points: np.ndarray,
              fields: Sequence[str] | None, overwrite: bool) -> tuple[Path, np.ndarray,
                                                                        tuple[str, ...]]:
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    path = new_output_path(path, overwrite)
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] < 3:
         raise ValueError(f"expected points of shape (N, C>=3), got {p.shape}")

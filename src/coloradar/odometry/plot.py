@@ -13,8 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import OutputExistsError
-from ..formats.atomic import atomic_write_bytes
+from ..formats.atomic import atomic_write_bytes, new_output_path
 
 try:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -87,9 +86,7 @@ def evaluation_figure(ev: Evaluation) -> Figure:
 def plot_evaluation(ev: Evaluation, path: str | os.PathLike[str], *,
                     overwrite: bool = False) -> Path:
     """Render :func:`evaluation_figure` to ``path`` (format from the suffix), atomically."""
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    path = new_output_path(path, overwrite)
     fig = evaluation_figure(ev)
     buf = io.BytesIO()
     fig.savefig(buf, format=path.suffix.lstrip(".").lower() or "png", dpi=fig.dpi)

@@ -11,8 +11,8 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from ..errors import FormatError, MissingDataError, OutputExistsError
-from ..formats.atomic import atomic_write_text
+from ..errors import FormatError, MissingDataError
+from ..formats.atomic import atomic_write_text, new_output_path
 from ..formats.text import parse_table
 from ..geometry import Trajectory
 
@@ -35,9 +35,7 @@ def write_tum(path: str | os.PathLike[str], trajectory: Trajectory, *,
 
     Raises :class:`~coloradar.OutputExistsError` when ``path`` exists and not ``overwrite``.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    path = new_output_path(path, overwrite)
     atomic_write_text(path, format_tum(trajectory, comments))
     return path
 

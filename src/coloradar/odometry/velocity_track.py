@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, OutputExistsError
-from ..formats.atomic import atomic_write_text
+from ..errors import FormatError
+from ..formats.atomic import atomic_write_text, new_output_path
 from .ego_velocity import EgoVelocity, EgoVelocityConfig, estimate_ego_velocity
 
 __all__ = [
@@ -173,9 +173,7 @@ def format_velocity_table(track: EgoVelocityTrack, comments: Iterable[str] = ())
 def write_velocity_table(path: str | os.PathLike[str], track: EgoVelocityTrack, *,
                          comments: Iterable[str] = (), overwrite: bool = False) -> Path:
     """Write ``track`` as CSV, atomically; :class:`~coloradar.OutputExistsError` if it exists."""
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    path = new_output_path(path, overwrite)
     atomic_write_text(path, format_velocity_table(track, comments))
     return path
 

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OutputExistsError
-from ..formats.atomic import atomic_write_bytes
+from ..formats.atomic import atomic_write_bytes, new_output_path
 
 try:
     import matplotlib
@@ -45,9 +44,7 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], *, overwrite: bool = 
     Raises :class:`~coloradar.OutputExistsError` when ``path`` exists and not ``overwrite``.
     The image has exactly the figure's size in pixels (no tight cropping).
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
+    path = new_output_path(path, overwrite)
     buf = io.BytesIO()
     fmt = path.suffix.lstrip(".").lower() or "png"
     fig.savefig(buf, format=fmt, dpi=fig.dpi)

@@ -21,8 +21,8 @@ from matplotlib import animation
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
-from ..formats.atomic import default_file_mode
+from ..errors import ColoradarError, MissingDataError
+from ..formats.atomic import default_file_mode, new_output_path
 from ._figure import new_figure
 from .scene import (
     REFERENCE_STREAMS,
@@ -114,9 +114,7 @@ def animate_run(seq, out: str | os.PathLike[str], *, start: float = 0.0,
     pathlib.Path
         ``out``.
     """
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise OutputExistsError(f"{out}: exists; pass overwrite=True (--overwrite) to replace it")
+    out = new_output_path(out, overwrite)
     suffix = out.suffix.lower()
     writer = _writer(suffix, fps)
     times = animation_times(seq, start, duration, fps)

@@ -23,7 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ColoradarError, OutputExistsError
+from ..errors import ColoradarError
+from ..formats.atomic import new_output_path
 from ..geometry import sensor_to_base, trajectory_from_groundtruth, window_indices
 from .scene import RADAR_STREAMS, _has, _run_start, _stream, radar_points, radar_source
 
@@ -65,9 +66,7 @@ def log_run_rrd(seq, out: str | os.PathLike[str], *, start: float = 0.0,
     except ImportError:
         raise ColoradarError("logging to .rrd needs rerun: pip install 'coloradar[rerun]'") \
             from None
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise OutputExistsError(f"{out}: exists; pass overwrite=True (--overwrite) to replace it")
+    out = new_output_path(out, overwrite)
     traj = trajectory_from_groundtruth(seq)
     t0 = _run_start(seq) + start
     t1 = None if duration is None else t0 + duration
