@@ -33,9 +33,9 @@ from ..calib import RADARS, Calibration, format_heatmap_cfg
 from ..dataset import FrameStream, find_runs, open_sequence
 from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..errors import ColoradarError, DataWarning, MissingDataError, OutputExistsError, WriteError
 from ..formats import heatmap_nbytes
-from ..formats.atomic import write_text_if_changed
+from ..formats.atomic import make_output_dir, write_text_if_changed
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, make_executor
@@ -51,6 +51,8 @@ from .layout import (
 from .manifest import (
     OutputLock,
     calibration_fingerprint,
+    input_changed,
+    input_fingerprint,
     read_manifest,
     settings_differences,
     settings_record,
@@ -86,6 +88,7 @@ class _RadarJob:
     heatmap_bytes: int
     heatmap_cfg: str
     outcome: RadarOutcome
+    input_key: str = ""
     todo: list[int] = field(default_factory=list)
     chunks_left: int = 0
     unsure: list[tuple[int, TaskError]] = field(default_factory=list)
@@ -119,6 +122,11 @@ _RUN_PARTS = ("cascade/adc_samples", "single_chip/adc_samples", "lidar", "imu", 
 
 def _check_target(t: RunTarget) -> None:
     run, out = t.path.resolve(), t.out.resolve()
+    probe = out  # the output folder, or the nearest of its parents that exists
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise WriteError(f"{t.out}: expected an output folder, but {probe} is a file")
     if _inside(out, run):
         raise ColoradarError(f"{t.out}: the output folder lies inside the run {t.path}; choose "
                              "an output folder outside it (coloradar never writes into a run)")
@@ -170,7 +178,7 @@ def _plan_run(t: RunTarget, calib: CalibLike, radars, frames: slice | None,
         job.radars.append(_RadarJob(
             radar, stream, calibration_fingerprint(rc), rec, positions,
             heatmap_nbytes(hcfg.shape), format_heatmap_cfg(hcfg),
-            RadarOutcome(frames=len(positions))))
+            RadarOutcome(frames=len(positions)), input_fingerprint(stream)))
         job.outcome.radars[radar] = job.radars[-1].outcome
     return job
 
@@ -208,7 +216,7 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
     """Under the lock: clear what ``overwrite`` replaces, remove partial files, record the
     settings, and find the frames still to do."""
     out = job.target.out
-    out.mkdir(parents=True, exist_ok=True)
+    make_output_dir(out)
     try:
         manifest = read_manifest(out)
     except OutputExistsError:
@@ -220,6 +228,13 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
     for rj in job.radars:
         for p in prods:
             folder, data = output_paths(out, rj.radar, p)
+            if not overwrite and input_changed(entries.get(f"{rj.radar}/{p}"), rj.input_key):
+                # Frames computed from input that has since been rewritten (a re-simulated
+                # run): stale, ours (recorded in the manifest), so redone rather than resumed.
+                warnings.warn(f"{folder}: the run's {rj.radar} ADC frames changed since this "
+                              "output was made; processing every frame again", DataWarning,
+                              stacklevel=3)
+                remove_product_output(out, rj.radar, p)
             if overwrite:
                 if f"{rj.radar}/{p}" in entries:
                     remove_product_output(out, rj.radar, p)
@@ -232,7 +247,8 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
             data.mkdir(parents=True, exist_ok=True)
             folders += [folder, data]
             entries[f"{rj.radar}/{p}"] = {"settings": rj.settings_rec,
-                                          "calibration_sha256": rj.calib_key}
+                                          "calibration_sha256": rj.calib_key,
+                                          "input_sha256": rj.input_key}
     clean_partial_files(folders)
     write_manifest(out, job.name, entries)
     for rj in job.radars:

@@ -3,7 +3,10 @@
 ``<out>/process_manifest.json`` records, per radar and product, the processing settings and a
 fingerprint of the radar calibration the frames there were computed with. A rerun with the
 same settings resumes (complete frames are kept); a rerun with different ones is refused
-unless ``overwrite`` — frames computed two ways never mix silently in one folder. An output
+unless ``overwrite`` — frames computed two ways never mix silently in one folder. The manifest
+also holds a fingerprint of each radar's input frames (names, sizes, modification times,
+timestamps): when the run was rewritten since (re-simulated, say), the frames made from the old
+input are stale and a rerun processes every frame again instead of resuming. An output
 folder without a manifest that already holds products (written by something else) is refused
 likewise.
 
@@ -30,9 +33,11 @@ from ..calib import (
     format_phase_frequency_calib,
     format_waveform_cfg,
 )
+from ..dataset import FrameStream
 from ..dsp import ProcessingSettings
-from ..errors import OutputExistsError
-from ..formats.atomic import write_text_if_changed
+from ..errors import FormatError, OutputExistsError, WriteError
+from ..formats.atomic import make_output_dir, write_text_if_changed
+from ..formats.source import read_file_text
 
 try:  # POSIX; elsewhere jobs are not guarded against each other
     import fcntl
@@ -43,6 +48,8 @@ __all__ = [
     "MANIFEST",
     "OutputLock",
     "calibration_fingerprint",
+    "input_changed",
+    "input_fingerprint",
     "read_manifest",
     "settings_differences",
     "settings_record",
@@ -69,6 +76,22 @@ def calibration_fingerprint(calib: RadarCalib) -> str:
         h.update(p.encode())
         h.update(b"\0")
     return h.hexdigest()
+
+
+def input_fingerprint(stream: FrameStream) -> str:
+    """The fingerprint of a radar's ADC frames recorded in the manifest
+    (:meth:`~coloradar.dataset.FrameStream.fingerprint`: every frame file's name, size and
+    modification time, and the timestamps; the whole stream, whatever ``--frames`` selects)."""
+    return stream.fingerprint()
+
+
+def input_changed(entry: dict[str, Any] | None, key: str) -> bool:
+    """True when a manifest ``entry`` records input other than ``key`` (an entry without an
+    input fingerprint, written before they were recorded, is taken as unchanged)."""
+    if not entry:
+        return False
+    stored = entry.get("input_sha256")
+    return bool(stored) and stored != key
 
 
 def settings_record(settings: ProcessingSettings | None) -> dict[str, Any]:
@@ -100,10 +123,13 @@ def read_manifest(out: Path) -> dict[str, Any] | None:
         When the file is there but unreadable (it cannot vouch for the files beside it).
     """
     path = out / MANIFEST
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not path.exists():
         return None
+    try:
+        text = read_file_text(path)
+    except FormatError as exc:  # not UTF-8
+        raise OutputExistsError(f"{exc}; pass overwrite=True (--overwrite) to replace this "
+                                "output") from None
     try:
         data = json.loads(text)
         if data.get("format") != FORMAT or not isinstance(data.get("products"), dict):
@@ -138,9 +164,13 @@ class OutputLock:
     def __enter__(self) -> OutputLock:
         if fcntl is None:  # pragma: no cover
             return self
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        make_output_dir(self.path.parent)
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise WriteError(f"{self.path}: cannot create the output lock "
+                                 f"({exc.strerror or exc})") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import operator
 import re
 import warnings
@@ -10,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import DataWarning, FormatError, MissingDataError
+from ..errors import DataWarning, FormatError, FrameIndexError, MissingDataError
 from ..formats.source import Source
 from ..formats.text import parse_imu, parse_poses, parse_timestamps
 
@@ -72,11 +73,25 @@ class FrameStream:
         rel = self._paths[self._index(k)]
         return self._decode(self._source.read_bytes(rel), self._source.describe(rel))
 
+    def fingerprint(self) -> str:
+        """SHA-256 of what identifies this stream's input: its name, every frame file's name and
+        version (size and modification time, see :meth:`Source.version_key`; nothing is read),
+        the frame numbers and the timestamps. It changes when a frame file is rewritten (a
+        re-simulated run), added or removed, or a timestamp changes; not when the run is moved.
+        """
+        h = hashlib.sha256(self.name.encode())
+        for rel in self._paths:
+            h.update(f"\0{rel}\0{self._source.version_key(rel)}".encode())
+        h.update(np.ascontiguousarray(self.frame_ids, dtype="<i8").tobytes())
+        h.update(np.ascontiguousarray(self.timestamps, dtype="<f8").tobytes())
+        return h.hexdigest()
+
     def _index(self, k: int) -> int:
         k = operator.index(k)
         n = len(self._paths)
         if not -n <= k < n:
-            raise IndexError(f"{self.name}: frame {k} out of range (the stream has {n} frames)")
+            raise FrameIndexError(f"{self._source.location}: {self.name} frame {k} out of range "
+                                  f"(the stream has {n} frames: 0..{n - 1}, or -{n}..-1)")
         return k % n
 
     def __getitem__(self, key):

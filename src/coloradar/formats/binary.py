@@ -7,12 +7,12 @@ and zips share one code path; ``read_*`` helpers read a path directly.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import FormatError
 from .atomic import atomic_write_bytes
+from .source import read_file_bytes
 
 __all__ = [
     "adc_nbytes",
@@ -138,7 +138,7 @@ def encode_pointcloud(points: np.ndarray, ncols: int) -> bytes:
 
 
 def _read(path: str | os.PathLike[str]) -> bytes:
-    return Path(path).read_bytes()
+    return read_file_bytes(path)
 
 
 def read_adc(path: str | os.PathLike[str], shape: tuple[int, int, int, int]) -> np.ndarray:
