@@ -42,6 +42,7 @@ from .executors import Executor, TaskError, make_executor
 from .layout import (
     PRODUCTS,
     clean_partial_files,
+    frame_file,
     output_paths,
     product_has_output,
     remove_product_output,
@@ -51,11 +52,11 @@ from .layout import (
 from .manifest import (
     OutputLock,
     calibration_fingerprint,
-    input_changed,
-    input_fingerprint,
+    input_versions,
     read_manifest,
     settings_differences,
     settings_record,
+    stale_frames,
     write_manifest,
 )
 from .report import REPORT, BatchReport, RadarOutcome, RunOutcome
@@ -88,7 +89,7 @@ class _RadarJob:
     heatmap_bytes: int
     heatmap_cfg: str
     outcome: RadarOutcome
-    input_key: str = ""
+    inputs: dict[str, str] = field(default_factory=dict)
     todo: list[int] = field(default_factory=list)
     chunks_left: int = 0
     unsure: list[tuple[int, TaskError]] = field(default_factory=list)
@@ -178,7 +179,7 @@ def _plan_run(t: RunTarget, calib: CalibLike, radars, frames: slice | None,
         job.radars.append(_RadarJob(
             radar, stream, calibration_fingerprint(rc), rec, positions,
             heatmap_nbytes(hcfg.shape), format_heatmap_cfg(hcfg),
-            RadarOutcome(frames=len(positions)), input_fingerprint(stream)))
+            RadarOutcome(frames=len(positions)), input_versions(stream)))
         job.outcome.radars[radar] = job.radars[-1].outcome
     return job
 
@@ -228,13 +229,6 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
     for rj in job.radars:
         for p in prods:
             folder, data = output_paths(out, rj.radar, p)
-            if not overwrite and input_changed(entries.get(f"{rj.radar}/{p}"), rj.input_key):
-                # Frames computed from input that has since been rewritten (a re-simulated
-                # run): stale, ours (recorded in the manifest), so redone rather than resumed.
-                warnings.warn(f"{folder}: the run's {rj.radar} ADC frames changed since this "
-                              "output was made; processing every frame again", DataWarning,
-                              stacklevel=3)
-                remove_product_output(out, rj.radar, p)
             if overwrite:
                 if f"{rj.radar}/{p}" in entries:
                     remove_product_output(out, rj.radar, p)
@@ -247,16 +241,39 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
             data.mkdir(parents=True, exist_ok=True)
             folders += [folder, data]
             entries[f"{rj.radar}/{p}"] = {"settings": rj.settings_rec,
-                                          "calibration_sha256": rj.calib_key,
-                                          "input_sha256": rj.input_key}
+                                          "calibration_sha256": rj.calib_key}
     clean_partial_files(folders)
-    write_manifest(out, job.name, entries)
+    inputs = dict((manifest or {}).get("inputs") or {})  # radars not processed now stay
+    for rj in job.radars:
+        if not overwrite:
+            _remove_stale(manifest, out, rj)
+        inputs[rj.radar] = rj.inputs
+    write_manifest(out, job.name, entries, inputs)
     for rj in job.radars:
         complete = set.intersection(*(valid_frames(out, rj.radar, p, rj.heatmap_bytes)
                                       for p in prods))
         ids = rj.stream.frame_ids
         rj.todo = [k for k in rj.positions if int(ids[k]) not in complete]
         rj.outcome.skipped = len(rj.positions) - len(rj.todo)
+
+
+def _remove_stale(manifest: dict | None, out: Path, rj: _RadarJob) -> None:
+    """Delete the product files of frames whose input was rewritten since they were made (a
+    re-simulated run, a repaired file): they are stale, and ours (the manifest records them),
+    so they are redone rather than resumed. Every product the manifest records is cleared,
+    requested now or not, so that none is later taken as made from the new input."""
+    recorded = (manifest or {}).get("products") or {}
+    prods = [p for p in PRODUCTS if f"{rj.radar}/{p}" in recorded]
+    have = set().union(*(valid_frames(out, rj.radar, p, rj.heatmap_bytes) for p in prods))
+    stale = stale_frames(manifest, rj.radar, rj.inputs, have)
+    if not stale:
+        return
+    for i in stale:
+        for p in prods:
+            frame_file(out, rj.radar, p, i).unlink(missing_ok=True)
+    warnings.warn(f"{out / rj.radar}: the ADC files of {len(stale)} frame(s) changed since their "
+                  f"output was made (first: frame {stale[0]}); processing them again",
+                  DataWarning, stacklevel=4)
 
 
 def _finish_radar(job: _RunJob, rj: _RadarJob, prods: tuple[str, ...]) -> None:

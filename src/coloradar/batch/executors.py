@@ -32,7 +32,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import CalibrationWarning, ColoradarError, DataWarning, MissingDependencyError
+from ..errors import CalibrationWarning, ColoradarError, DataWarning, MissingDependencyError, SettingsError
 
 __all__ = ["DaskExecutor", "Executor", "LocalExecutor", "SerialExecutor", "TaskError",
            "make_executor"]
@@ -62,7 +62,7 @@ class TaskError:
 
 def _check_errors(errors: str) -> None:
     if errors not in _ERRORS:
-        raise ValueError(f"errors must be one of {_ERRORS}, got {errors!r}")
+        raise SettingsError(f"errors must be one of {_ERRORS}, got {errors!r}")
 
 
 class Executor:

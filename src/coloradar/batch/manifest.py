@@ -4,9 +4,10 @@
 fingerprint of the radar calibration the frames there were computed with. A rerun with the
 same settings resumes (complete frames are kept); a rerun with different ones is refused
 unless ``overwrite`` — frames computed two ways never mix silently in one folder. The manifest
-also holds a fingerprint of each radar's input frames (names, sizes, modification times,
-timestamps): when the run was rewritten since (re-simulated, say), the frames made from the old
-input are stale and a rerun processes every frame again instead of resuming. An output
+also records, for each radar, a version of every input frame file (size and modification
+time): a frame whose input was rewritten since its output was made (a re-simulated run, a
+repaired file) is stale, and a rerun processes it again instead of counting it complete. An
+output
 folder without a manifest that already holds products (written by something else) is refused
 likewise.
 
@@ -48,11 +49,11 @@ __all__ = [
     "MANIFEST",
     "OutputLock",
     "calibration_fingerprint",
-    "input_changed",
-    "input_fingerprint",
+    "input_versions",
     "read_manifest",
     "settings_differences",
     "settings_record",
+    "stale_frames",
     "write_manifest",
 ]
 
@@ -78,20 +79,23 @@ def calibration_fingerprint(calib: RadarCalib) -> str:
     return h.hexdigest()
 
 
-def input_fingerprint(stream: FrameStream) -> str:
-    """The fingerprint of a radar's ADC frames recorded in the manifest
-    (:meth:`~coloradar.dataset.FrameStream.fingerprint`: every frame file's name, size and
-    modification time, and the timestamps; the whole stream, whatever ``--frames`` selects)."""
-    return stream.fingerprint()
+def input_versions(stream: FrameStream) -> dict[str, str]:
+    """Frame number (as text, a JSON key) to the version of its ADC file
+    (:meth:`~coloradar.dataset.FrameStream.versions`), for every frame of ``stream`` whatever
+    ``--frames`` selects; what the manifest records under ``inputs/<radar>``."""
+    return {str(int(i)): v for i, v in zip(stream.frame_ids, stream.versions(), strict=True)}
 
 
-def input_changed(entry: dict[str, Any] | None, key: str) -> bool:
-    """True when a manifest ``entry`` records input other than ``key`` (an entry without an
-    input fingerprint, written before they were recorded, is taken as unchanged)."""
-    if not entry:
-        return False
-    stored = entry.get("input_sha256")
-    return bool(stored) and stored != key
+def stale_frames(manifest: dict[str, Any] | None, radar: str, current: dict[str, str],
+                 have_output: set[int]) -> list[int]:
+    """Frame numbers among ``have_output`` whose input differs from the one recorded when their
+    output was made: a changed version, or a frame the record does not know. A manifest without
+    a record for ``radar`` (written before inputs were recorded) vouches for every frame."""
+    stored = ((manifest or {}).get("inputs") or {}).get(radar)
+    if not isinstance(stored, dict):
+        return []
+    return sorted(i for i in have_output
+                  if str(i) in current and stored.get(str(i)) != current[str(i)])
 
 
 def settings_record(settings: ProcessingSettings | None) -> dict[str, Any]:
@@ -140,11 +144,16 @@ def read_manifest(out: Path) -> dict[str, Any] | None:
     return data
 
 
-def write_manifest(out: Path, run: str, entries: dict[str, dict[str, Any]]) -> None:
+def write_manifest(out: Path, run: str, entries: dict[str, dict[str, Any]],
+                   inputs: dict[str, dict[str, str]] | None = None) -> None:
     """Write (atomically, only when its content changes) the manifest with ``entries``:
-    ``"<radar>/<product>" -> {"settings": ..., "calibration_sha256": ...}``."""
-    text = json.dumps({"format": FORMAT, "run": run, "coloradar_version": __version__,
-                       "products": dict(sorted(entries.items()))}, indent=1) + "\n"
+    ``"<radar>/<product>" -> {"settings": ..., "calibration_sha256": ...}``, and ``inputs``:
+    ``"<radar>" -> {frame number: version of its input file}`` (:func:`input_versions`)."""
+    record: dict[str, Any] = {"format": FORMAT, "run": run, "coloradar_version": __version__,
+                              "products": dict(sorted(entries.items()))}
+    if inputs:
+        record["inputs"] = dict(sorted(inputs.items()))
+    text = json.dumps(record, indent=1) + "\n"
     write_text_if_changed(out / MANIFEST, text)
 
 

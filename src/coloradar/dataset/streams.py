@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import operator
 import re
 import warnings
@@ -73,18 +72,12 @@ class FrameStream:
         rel = self._paths[self._index(k)]
         return self._decode(self._source.read_bytes(rel), self._source.describe(rel))
 
-    def fingerprint(self) -> str:
-        """SHA-256 of what identifies this stream's input: its name, every frame file's name and
-        version (size and modification time, see :meth:`Source.version_key`; nothing is read),
-        the frame numbers and the timestamps. It changes when a frame file is rewritten (a
-        re-simulated run), added or removed, or a timestamp changes; not when the run is moved.
-        """
-        h = hashlib.sha256(self.name.encode())
-        for rel in self._paths:
-            h.update(f"\0{rel}\0{self._source.version_key(rel)}".encode())
-        h.update(np.ascontiguousarray(self.frame_ids, dtype="<i8").tobytes())
-        h.update(np.ascontiguousarray(self.timestamps, dtype="<f8").tobytes())
-        return h.hexdigest()
+    def versions(self) -> list[str]:
+        """For every frame, a short text that changes whenever its file is rewritten (size and
+        modification time, or a zip member's size, CRC and date; see
+        :meth:`~coloradar.formats.source.Source.version_key`). Nothing is read: what a
+        resumable job records to tell later which inputs changed since it ran."""
+        return [self._source.version_key(rel) for rel in self._paths]
 
     def _index(self, k: int) -> int:
         k = operator.index(k)

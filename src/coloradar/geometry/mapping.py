@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import MissingDataError
+from ..errors import MissingDataError, SettingsError
 from .frames import sensor_to_base
 from .se3 import SE3
 from .timesync import window_indices
@@ -42,9 +42,9 @@ def voxel_downsample(points: np.ndarray, voxel_size: float,
     """
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] < 3:
-        raise ValueError(f"expected points of shape (N, C>=3), got {p.shape}")
+        raise SettingsError(f"expected points of shape (N, C>=3), got {p.shape}")
     if not voxel_size > 0:
-        raise ValueError(f"voxel_size must be positive, got {voxel_size}")
+        raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
     finite = np.all(np.isfinite(p[:, :3]), axis=1)
     p = p[finite]
     if p.shape[0] == 0:
@@ -61,7 +61,7 @@ def voxel_downsample(points: np.ndarray, voxel_size: float,
     if reduce == "first":
         return p[first].copy()
     if reduce != "mean":
-        raise ValueError(f"reduce must be 'mean' or 'first', got {reduce!r}")
+        raise SettingsError(f"reduce must be 'mean' or 'first', got {reduce!r}")
     m = first.size
     counts = np.bincount(inverse, minlength=m).astype(np.float64)
     out = np.empty((m, p.shape[1]), dtype=p.dtype)

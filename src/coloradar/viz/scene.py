@@ -19,7 +19,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from ..calib import Calibration, HeatmapConfig
-from ..errors import MissingDataError
+from ..errors import MissingDataError, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base, trajectory_from_groundtruth
 from ._figure import new_figure
 
@@ -351,7 +351,7 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
         if extent is not None and scene.rig is not None:
             scene = _clip_3d(scene, scene.rig[0], extent)
     else:
-        raise ValueError(f"view must be 'bev' or '3d', got {view!r}")
+        raise SettingsError(f"view must be 'bev' or '3d', got {view!r}")
     if scene.lidar is not None and len(scene.lidar):
         if view == "bev":
             ax.scatter(*uv(scene.lidar), s=0.4, c="0.55", linewidths=0, label="lidar",
