@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import DataWarning, FormatError, FrameIndexError, MissingDataError
+from ..errors import ColoradarError, DataWarning, FormatError, FrameIndexError, MissingDataError
 from ..formats.source import Source
 from ..formats.text import parse_imu, parse_poses, parse_timestamps
 
@@ -78,6 +78,29 @@ class FrameStream:
         :meth:`~coloradar.formats.source.Source.version_key`). Nothing is read: what a
         resumable job records to tell later which inputs changed since it ran."""
         return [self._source.version_key(rel) for rel in self._paths]
+
+    def check_files(self) -> list[str]:
+        """Problems of the frame files, found without reading them: a file that is not a
+        regular file, or whose size its kind (and the calibration) does not allow.
+
+        Each distinct size is checked once, by decoding that many zero bytes with the stream's
+        own decoder (which checks sizes only), so the rule is the reader's. Returns one line
+        per problem (empty: every file has a size the reader accepts).
+        """
+        problems: list[str] = []
+        by_size: dict[int, list[str]] = {}
+        for rel in self._paths:
+            try:
+                by_size.setdefault(self._source.file_size(rel), []).append(rel)
+            except ColoradarError as exc:
+                problems.append(str(exc))
+        for size, rels in sorted(by_size.items()):
+            try:
+                self._decode(bytes(size), self._source.describe(rels[0]))
+            except FormatError as exc:
+                more = f" (and {len(rels) - 1} more file(s) of that size)" if len(rels) > 1 else ""
+                problems.append(f"{exc}{more}")
+        return problems
 
     def _index(self, k: int) -> int:
         k = operator.index(k)
