@@ -10,7 +10,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ColoradarError, DataWarning, FormatError, FrameIndexError, MissingDataError
+from ..errors import (
+    ColoradarError,
+    DataWarning,
+    FormatError,
+    FrameIndexError,
+    MissingDataError,
+    ReadError,
+)
 from ..formats.source import Source
 from ..formats.text import parse_imu, parse_poses, parse_timestamps
 
@@ -78,6 +85,17 @@ class FrameStream:
         :meth:`~coloradar.formats.source.Source.version_key`). Nothing is read: what a
         resumable job records to tell later which inputs changed since it ran."""
         return [self._source.version_key(rel) for rel in self._paths]
+
+    def read_or_skip(self, k: int) -> np.ndarray | None:
+        """Frame ``k``, or None with a :class:`~coloradar.DataWarning` naming the file and what
+        is wrong when it cannot be read (malformed, not a regular file, vanished): what the
+        commands that walk many frames use, so that one bad frame is reported and skipped, as
+        ``coloradar process`` does, instead of ending the whole command."""
+        try:
+            return self.read(k)
+        except (FormatError, ReadError, MissingDataError) as exc:
+            warnings.warn(f"{exc}; {self.name} frame {k} skipped", DataWarning, stacklevel=2)
+            return None
 
     def check_files(self) -> list[str]:
         """Problems of the frame files, found without reading them: a file that is not a
