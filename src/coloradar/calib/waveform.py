@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 from ..errors import CalibrationError, CalibrationWarning
 from ._parse import get_number, key_values
@@ -169,7 +170,7 @@ def check_waveform_bounds(values: dict[str, float], where: str) -> None:
                 f"finite value in {'(' if lo_open else '['}{lo:g}, {hi:g}]{u}")
 
 
-def _fix_units(values: dict[str, float], name: str) -> dict[str, float]:
+def _fix_units(values: dict[str, Any], name: str) -> dict[str, Any]:
     """Correct the unit defects of the real cascade file, with a warning for each change.
 
     Chirp times of TI radars are microseconds to a few hundred microseconds. A value above 10 ms

@@ -20,6 +20,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
@@ -171,7 +172,7 @@ class ProcessingSettings:
             raise SettingsError(f"{name}: cannot use {value!r} (default {default!r})") from None
 
 
-def _range_doppler_pair(name: str, value: object) -> tuple[int, int]:
+def _range_doppler_pair(name: str, value: Any) -> tuple[int, int]:
     """A CFAR window size as ``(range, Doppler)`` cells: one number stands for both axes."""
     try:
         t = tuple(int(v) for v in value) if isinstance(value, (tuple, list)) else (int(value),)
