@@ -374,3 +374,20 @@ def test_map_and_odometry_skip_and_report_a_bad_frame(copy):
     with pytest.warns(DataWarning, match="radar_pointcloud_2.bin"):
         track = cr.odometry.run_ego_velocity(seq, "single_chip", "pointclouds")
     assert len(track) == 3 and not track.ok[2] and "radar_pointcloud_2.bin" in track.reasons[2]
+
+
+def test_animation_scenes_skip_and_report_a_bad_frame(copy):
+    pytest.importorskip("matplotlib")
+    from coloradar.viz import gather_scene
+
+    lidar = copy / RUN / "lidar" / "pointclouds" / "lidar_pointcloud_1.bin"
+    lidar.write_bytes(b"\0" * 7)
+    seq = cr.open_sequence(copy / RUN)
+    t_bad = float(seq.lidar.pointclouds.timestamps[1])
+    cache: dict = {}
+    with pytest.warns(DataWarning, match="lidar_pointcloud_1.bin"):
+        scene = gather_scene(seq, t_bad, cache=cache)
+    assert scene.lidar is None and "lidar/pointclouds" not in scene.sources
+    assert scene.radars  # the other sensors are still drawn
+    t_good = float(seq.lidar.pointclouds.timestamps[2])
+    assert gather_scene(seq, t_good, cache=cache).lidar is not None
