@@ -13,7 +13,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..calib import HeatmapConfig
-from ..errors import SettingsError
+from ..errors import FrameIndexError, SettingsError
 from ._figure import cell_edges, new_figure, to_db
 
 __all__ = [
@@ -179,7 +179,7 @@ def _pick(hm: np.ndarray, axis: int, index: int | None, reduce: str) -> tuple[np
     if index is None:
         index = int(np.unravel_index(np.argmax(inten), inten.shape)[axis])
     if not -inten.shape[axis] <= index < inten.shape[axis]:
-        raise IndexError(f"bin {index} out of range for an axis of {inten.shape[axis]} bins")
+        raise FrameIndexError(f"bin {index} out of range for an axis of {inten.shape[axis]} bins")
     return np.take(inten, index, axis), np.take(rate, index, axis), index % inten.shape[axis]
 
 
