@@ -35,6 +35,7 @@ from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError, MissingDataError, OutputExistsError
 from ..formats import heatmap_nbytes
+from ..formats.layout import LAYOUTS
 from ..formats.atomic import write_text_if_changed
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
@@ -113,8 +114,11 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-_RUN_PARTS = ("cascade/adc_samples", "single_chip/adc_samples", "lidar", "imu", "groundtruth",
-              "vicon")
+# Folders of a run that ``process`` never writes: an output folder holding one is a run.
+_RUN_PARTS = tuple(dict.fromkeys(
+    m for lay in LAYOUTS.values() for m in lay.run_markers
+    if not any(m == s.folder for s in lay.frames.values()
+               if s.sensor in lay.radars and s.product in PRODUCTS)))
 
 
 def _check_target(t: RunTarget) -> None:

@@ -28,10 +28,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if path.is_dir() and not is_run_folder(path):
         ds = open_dataset(path, calib=args.calib)
-        print(f"dataset {path}: {len(ds)} runs")
+        kind = "" if ds.layout.name == "coloradar" else f" ({ds.layout.title} layout)"
+        print(f"dataset {path}: {len(ds)} runs{kind}")
         for seq in ds:
             print(format_sequence_summary(seq))
-        print(format_calibration_summary(ds.calib))
+        print(format_calibration_summary(ds))
         return 0
     seq = open_sequence(path, calib=args.calib)
     print(format_sequence_summary(seq))
