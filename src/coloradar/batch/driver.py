@@ -35,8 +35,8 @@ from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError, MissingDataError, OutputExistsError
 from ..formats import heatmap_nbytes
-from ..formats.layout import LAYOUTS
 from ..formats.atomic import write_text_if_changed
+from ..formats.layout import LAYOUTS
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, make_executor

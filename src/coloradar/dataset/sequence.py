@@ -82,8 +82,9 @@ class _SensorBase:
                 raise MissingDataError(f"{self._seq.location}: no {key} in this run "
                                        f"({self.name} has: {', '.join(have) or 'nothing'})")
             st = layout.frames[key]
-            data_dir = self._seq._data_dir(st)
-            self._streams[key] = open_frame_stream(key, self._seq.source, st.folder, data_dir,
+            src = self._seq._source_of(st)
+            data_dir = self._seq._data_dir(st, src)
+            self._streams[key] = open_frame_stream(key, src, st.folder, data_dir,
                                                    st.prefix, self._decoder(product),
                                                    timestamps=st.timestamps,
                                                    first_frame=layout.first_frame)
@@ -203,11 +204,15 @@ class Sequence:
         Run name (defaults to the folder or zip name).
     layout
         The dataset layout (:data:`coloradar.formats.layout.LAYOUTS`); default ColoRadar.
+    products
+        Output of ``coloradar process`` for this run (ColoRadar layout): its radar streams
+        are part of the sequence and take precedence over the run's own.
     """
 
     def __init__(self, source: Source, calib: Calibration, name: str | None = None,
-                 layout: str | RunLayout = COLORADAR):
+                 layout: str | RunLayout = COLORADAR, products: Source | None = None):
         self.source = source
+        self.products = products
         self.calib = calib
         self.layout = get_layout(layout)
         loc = source.location.rstrip("/")
@@ -222,21 +227,30 @@ class Sequence:
         """Sensor folders present in the run."""
         return [s for s in self.layout.sensor_folders if self.source.is_dir(s)]
 
-    def _data_dir(self, st: FrameLayout) -> str:
-        """The stream's data folder as present in this run (the layout's, or an alternative)."""
+    def _source_of(self, st: FrameLayout) -> Source:
+        """Where stream ``st`` is read from: the products folder when it holds the stream."""
+        if (self.products is not None and st.sensor in self.layout.radars
+                and self.products.is_dir(COLORADAR.frame(st.name).data)):
+            return self.products
+        return self.source
+
+    def _data_dir(self, st: FrameLayout, src: Source) -> str:
+        """The stream's data folder as present in ``src`` (the layout's, or an alternative)."""
         for d in (st.data, *st.alt_data):
-            if self.source.is_dir(d) and (d == st.data or self._holds_frames(d, st.prefix)):
+            if src.is_dir(d) and (d == st.data or self._holds_frames(src, d, st.prefix)):
                 return d
         return st.data
 
-    def _holds_frames(self, folder: str, prefix: str) -> bool:
-        return any(n.startswith(prefix + "_") for n in self.source.listdir(folder))
+    @staticmethod
+    def _holds_frames(src: Source, folder: str, prefix: str) -> bool:
+        return any(n.startswith(prefix + "_") for n in src.listdir(folder))
 
     def _has_stream(self, key: str) -> bool:
         lay = self.layout
         if key in lay.frames:
             st = lay.frames[key]
-            return self.source.is_dir(st.data) or any(self.source.is_dir(d) for d in st.alt_data)
+            src = self._source_of(st)
+            return src.is_dir(st.data) or any(src.is_dir(d) for d in st.alt_data)
         if key in lay.tables:
             return self.source.exists(lay.tables[key].path)
         return False
@@ -244,6 +258,16 @@ class Sequence:
     def available(self) -> list[str]:
         """Streams present in the run, e.g. ``["cascade/adc", "lidar/pointclouds", "imu"]``."""
         return [k for k in self.layout.stream_names if self._has_stream(k)]
+
+    def stream(self, name: str) -> FrameStream:
+        """The frame stream ``name`` (``"cascade/adc"``, ``"lidar/pointclouds"``,
+        ``"camera/rgb"`` …, see :attr:`layout`)."""
+        if name not in self.layout.frames:
+            raise MissingDataError(f"{self.location}: no stream {name!r} in the "
+                                   f"{self.layout.title} layout (streams: "
+                                   f"{', '.join(self.layout.frames)})")
+        sensor, product = name.split("/", 1)
+        return getattr(getattr(self, sensor), product)
 
     def _missing(self, what: str) -> MissingDataError:
         return MissingDataError(f"{self.location}: no {what} in this run (present: "
@@ -253,7 +277,8 @@ class Sequence:
         if name not in self.layout.radars:
             raise MissingDataError(f"{self.location}: the {self.layout.title} layout has no "
                                    f"{name} radar (it has {', '.join(self.layout.radars)})")
-        if not self.source.is_dir(name):
+        if not (self.source.is_dir(name)
+                or (self.products is not None and self.products.is_dir(name))):
             raise self._missing(f"{name} radar")
         return RadarSensor(self, name, self.calib.radar(name))
 
@@ -348,7 +373,8 @@ def resolve_calibration(calib: Calibration | str | os.PathLike[str] | None,
 
 def open_sequence(path: str | os.PathLike[str],
                   calib: Calibration | str | os.PathLike[str] | None = None,
-                  layout: str | RunLayout | None = None) -> Sequence:
+                  layout: str | RunLayout | None = None,
+                  products: str | os.PathLike[str] | None = None) -> Sequence:
     """Open one run, a folder or a ``.zip`` read in place.
 
     Parameters
@@ -362,6 +388,10 @@ def open_sequence(path: str | os.PathLike[str],
     layout
         ``"coloradar"``, ``"coloradar_plus"``, or None to recognise it
         (:func:`detect_layout`).
+    products
+        The folder ``coloradar process`` wrote for this run (``OUT`` for one run,
+        ``OUT/<run name>`` for a dataset): its heatmaps and point clouds become the radars'
+        streams (in place of the run's own), beside the run's ground truth, lidar and IMU.
 
     Returns
     -------
@@ -376,4 +406,10 @@ def open_sequence(path: str | os.PathLike[str],
                                f"{', '.join(lay.run_markers)} inside; found "
                                f"{', '.join(src.listdir('')[:10]) or 'nothing'})")
     name = p.name.removesuffix(".zip")
-    return Sequence(src, resolve_calibration(calib, p, lay), name, lay)
+    prod = None
+    if products is not None:
+        prod = open_source(Path(products))
+        if not is_run(prod, COLORADAR):
+            raise MissingDataError(f"{products}: not an output folder of coloradar process "
+                                   "(no <radar>/heatmaps or <radar>/pointclouds inside)")
+    return Sequence(src, resolve_calibration(calib, p, lay), name, lay, prod)
