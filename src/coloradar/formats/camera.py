@@ -22,10 +22,10 @@ from ..errors import FormatError
 __all__ = ["IMAGE_CHANNELS", "IMAGE_DTYPES", "decode_image", "encode_image",
            "parse_camera_info"]
 
-IMAGE_DTYPES = {"rgb": np.dtype(np.uint8), "depth": np.dtype("<u2")}
+IMAGE_DTYPES: dict[str, np.dtype[Any]] = {"rgb": np.dtype(np.uint8), "depth": np.dtype("<u2")}
 """Pixel type of each camera stream."""
 
-IMAGE_CHANNELS = {"rgb": 3, "depth": 1}
+IMAGE_CHANNELS: dict[str, int] = {"rgb": 3, "depth": 1}
 """Values per pixel of each camera stream."""
 
 

@@ -7,6 +7,8 @@ has them (else heatmaps computed from ADC); the scene view is :func:`~.scene.plo
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from matplotlib.figure import Figure
 
@@ -80,7 +82,7 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
     if view not in VIEWS:
         raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
     if view == "scene":
-        gather = {}
+        gather: dict[str, Any] = {}
         if radar is not None:
             if stream is None:
                 stream = radar_source(seq, radar)
