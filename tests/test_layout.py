@@ -215,3 +215,34 @@ def test_layout_table_is_consistent():
     # process writes ColoRadar-layout products of both radars.
     for radar in COLORADAR.radars:
         assert {"heatmaps", "pointclouds"} <= set(COLORADAR.radar_streams(radar))
+
+
+def test_heatmaps_are_placed_on_the_grid_stored_beside_them(tmp_path):
+    """Heatmaps made by ``process`` carry their own grid (true bin angles); points are placed
+    on it, not on the calibration's shipped angle lists (half a bin apart)."""
+    from _synth import write_run
+
+    from coloradar.calib import format_heatmap_cfg, preset_calibration
+    from coloradar.dsp import RadarProcessor, radar_point_stream
+    from coloradar.formats import write_heatmap
+
+    calib = preset_calibration()
+    truth = write_run(tmp_path, n_cascade=1, calib=calib)
+    run = truth["path"]
+    grid = RadarProcessor(calib.cascade).heatmap_config()
+    assert not np.allclose(grid.azimuth_bins, calib.cascade.heatmap.azimuth_bins)
+    (run / "cascade/heatmaps/heatmap_cfg.txt").write_text(format_heatmap_cfg(grid))
+    e, a, r = 20, 90, 60
+    hm = np.zeros((*grid.shape, 2), np.float32)
+    hm[..., 0] = 1.0
+    hm[e, a, r, 0] = 1e4
+    write_heatmap(run / "cascade/heatmaps/data/heatmap_0.bin", hm)
+    seq = open_sequence(run)
+    np.testing.assert_array_equal(seq.cascade.heatmap_config.azimuth_bins, grid.azimuth_bins)
+    stream, points = radar_point_stream(seq, "cascade", "heatmaps",
+                                        processing={"threshold": 100.0})
+    pts = points(stream[0])
+    uy, uz = np.sin(grid.azimuth_bins[a]), np.sin(grid.elevation_bins[e])
+    expect = r * grid.range_bin_width * np.array([np.sqrt(1 - uy**2 - uz**2), uy, uz])
+    assert pts.shape == (1, 5)
+    np.testing.assert_allclose(pts[0, :3], expect, atol=1e-5)

@@ -7,8 +7,8 @@ import warnings
 from functools import cached_property, partial
 from pathlib import Path
 
-from ..calib import Calibration, RadarCalib, load_calibration
-from ..errors import CalibrationWarning, MissingDataError
+from ..calib import Calibration, HeatmapConfig, RadarCalib, load_calibration, parse_heatmap_cfg
+from ..errors import CalibrationWarning, FormatError, MissingDataError
 from ..formats.binary import (
     decode_adc,
     decode_heatmap,
@@ -128,6 +128,22 @@ class RadarSensor(_SensorBase):
     def pointclouds(self) -> FrameStream:
         """The sensor's own point clouds, each float32 ``(N, 5)`` x y z intensity range_rate."""
         return self._stream("pointclouds")
+
+    @property
+    def heatmap_config(self) -> HeatmapConfig:
+        """The grid of :attr:`heatmaps`: the ``heatmap_cfg.txt`` stored beside them when there
+        is one (``coloradar process`` and the simulator write the grid they used), else the
+        calibration's."""
+        st = self._seq.layout.frame(f"{self.name}/heatmaps")
+        src = self._seq._source_of(st)
+        rel = f"{st.folder}/heatmap_cfg.txt"
+        if not src.exists(rel):
+            return self.calib.heatmap
+        cfg = parse_heatmap_cfg(src.read_text(rel), src.describe(rel))
+        if cfg.shape != self.calib.heatmap.shape:
+            raise FormatError(f"{src.describe(rel)}: a {cfg.shape} grid, but the calibration's "
+                              f"heatmaps are {self.calib.heatmap.shape} (el, az, range)")
+        return cfg
 
     def __repr__(self) -> str:
         return f"<RadarSensor {self.name} of {self._seq.name}>"

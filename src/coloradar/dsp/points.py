@@ -157,4 +157,7 @@ def radar_point_stream(seq: _Seq, radar: str, source: PointSource | None = None,
                              f"{', '.join(POINT_SOURCES)}")
     sensor = seq.radar(radar)
     stream = getattr(sensor, src)
-    return stream, FramePoints(sensor.calib, src, processing=processing, max_points=max_points)
+    # Heatmaps are placed on the grid they were made on (heatmap_cfg.txt beside them).
+    grid = getattr(sensor, "heatmap_config", None) if src == "heatmaps" else None
+    return stream, FramePoints(sensor.calib, src, processing=processing, heatmap_config=grid,
+                               max_points=max_points)

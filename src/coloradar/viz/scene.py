@@ -90,7 +90,11 @@ def radar_points(seq, radar: str, name: str, data: np.ndarray, *, max_points: in
     key = ("points", name, max_points)
     if key not in cache:
         source = cast(PointSource, name.split("/", 1)[1])
-        cache[key] = FramePoints(seq.calib.radar(radar), source, max_points=max_points)
+        grid = None
+        if source == "heatmaps" and hasattr(seq, "radar"):
+            grid = seq.radar(radar).heatmap_config      # the grid the heatmaps were made on
+        cache[key] = FramePoints(seq.calib.radar(radar), source, heatmap_config=grid,
+                                 max_points=max_points)
     return cache[key](data)
 
 
