@@ -221,7 +221,6 @@ def test_heatmaps_are_placed_on_the_grid_stored_beside_them(tmp_path):
     """Heatmaps made by ``process`` carry their own grid (true bin angles); points are placed
     on it, not on the calibration's shipped angle lists (half a bin apart)."""
     from _synth import write_run
-
     from coloradar.calib import format_heatmap_cfg, preset_calibration
     from coloradar.dsp import RadarProcessor, radar_point_stream
     from coloradar.formats import write_heatmap
