@@ -245,3 +245,27 @@ def test_heatmaps_are_placed_on_the_grid_stored_beside_them(tmp_path):
     expect = r * grid.range_bin_width * np.array([np.sqrt(1 - uy**2 - uz**2), uy, uz])
     assert pts.shape == (1, 5)
     np.testing.assert_allclose(pts[0, :3], expect, atol=1e-5)
+
+
+def test_plus_run_zip_and_simulate_command(plus_root, tmp_path):
+    import shutil
+
+    from _synth import zip_folder
+
+    root, res, _ = plus_root
+    other = tmp_path / "root"
+    (other / "kitti").mkdir(parents=True)
+    shutil.copytree(root / "calib", other / "calib")
+    zip_folder(res.run_path, other / "kitti" / f"{res.run_path.name}.zip", top=res.run_path.name)
+    ds = open_dataset(other)
+    assert ds.layout is COLORADAR_PLUS and ds.sequences == [res.run_path.name]
+    zipped, folder = ds[res.run_path.name], open_dataset(root)[res.run_path.name]
+    np.testing.assert_array_equal(zipped.cascade.adc[0], folder.cascade.adc[0])
+    np.testing.assert_array_equal(zipped.stream("camera/rgb")[1], folder.camera.rgb[1])
+    out = tmp_path / "sim"
+    assert main(["simulate", str(out), "--duration", "0.3", "--layout", "coloradar_plus",
+                 "--sensors", "imu,groundtruth", "--quiet"]) == 0
+    (run,) = (out / "kitti").iterdir()
+    assert open_sequence(run).available() == ["imu", "groundtruth"]
+    assert main(["simulate", str(tmp_path / "x"), "--layout", "coloradar_plus",
+                 "--sensors", "single_chip", "--quiet"]) == 1
