@@ -40,6 +40,8 @@ STREAMS: dict[str, tuple[str, str, str]] = {
     "single_chip/heatmaps": ("single_chip/heatmaps", "single_chip/heatmaps/data", "heatmap"),
     "single_chip/pointclouds": ("single_chip/pointclouds", "single_chip/pointclouds/data",
                                 "radar_pointcloud"),
+    # Not in the release; the layout ``coloradar process`` and ``coloradar import`` write.
+    "cascade/pointclouds": ("cascade/pointclouds", "cascade/pointclouds/data", "radar_pointcloud"),
     "lidar/pointclouds": ("lidar", "lidar/pointclouds", "lidar_pointcloud"),
 }
 """Layout of the frame streams inside a run (DESIGN.md §1)."""
