@@ -34,6 +34,7 @@ extrinsics found on ``/tf_static`` (resolved through the tf tree to ``base``).
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import time
@@ -305,6 +306,12 @@ def _radar_point_stream(seq: Sequence, radar: str, source: str,
                            f" to export (present: {', '.join(have) or 'nothing'})")
 
 
+@functools.lru_cache(maxsize=2)
+def _builder(fmt: str) -> _Builder:
+    # Building a typestore compiles its message classes: ~0.1-0.3 s, paid once per format.
+    return _Builder(fmt)
+
+
 @dataclass
 class _Planned:
     """One stream to export: its times, frame id, and where its samples come from."""
@@ -480,7 +487,7 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
         shutil.rmtree(partial) if partial.is_dir() else partial.unlink()
     out.parent.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    b = _Builder(fmt)
+    b = _builder(fmt)
     writer = _open_writer(fmt, partial)
     counts = {p.key: 0 for p in plan}
     try:
