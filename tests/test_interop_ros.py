@@ -95,6 +95,13 @@ def test_exported_bag_read_by_rosbags_alone(run, tmp_path, fmt):
     got: dict[str, list] = {}
     with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
+        (tf_conn,) = [c for c in reader.connections if c.topic == "/tf_static"]
+        if fmt == "ros1":
+            assert tf_conn.ext.latching == 1
+        else:  # latched in ROS 2 terms: transient local
+            from rosbags.interfaces import QosDurability
+
+            assert tf_conn.ext.offered_qos_profiles[0].durability == QosDurability.TRANSIENT_LOCAL
         last = -1
         for conn, t_ns, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)

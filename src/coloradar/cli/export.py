@@ -79,9 +79,10 @@ def run(args: argparse.Namespace) -> int:
                          progress=prog)
     finally:
         prog.close()
-    rate = res.frames / res.seconds if res.seconds > 0 else float("nan")
-    print(f"{res.path}: {args.format} bag, {res.messages} messages in {res.seconds:.1f} s "
-          f"({rate:.1f} point-cloud frames/s)")
+    sec = max(res.seconds, 1e-9)
+    print(f"{res.path}: {args.format} bag, {res.messages} messages ({res.frames} point clouds) "
+          f"in {res.seconds:.1f} s ({res.messages / sec:.0f} messages/s, "
+          f"{res.frames / sec:.1f} point clouds/s)")
     for topic, n in res.counts.items():
         print(f"  {topic:<24} {n:>7}")
     for radar, src in res.sources.items():

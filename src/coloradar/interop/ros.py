@@ -498,7 +498,9 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
                 conns[p.key] = writer.add_connection(topic_of[p.key], p.msgtype, typestore=b.store,
                                                      latching=1 if p.key == "tf_static" else None)
             else:
-                conns[p.key] = writer.add_connection(topic_of[p.key], p.msgtype, typestore=b.store)
+                qos = _latched_qos() if p.key == "tf_static" else ()
+                conns[p.key] = writer.add_connection(topic_of[p.key], p.msgtype, typestore=b.store,
+                                                     offered_qos_profiles=qos)
         for done, j in enumerate(order, start=1):
             p = plan[int(stream_i[j])]
             t_s, t_ns, k = int(sec[j]), int(nsec[j]), int(frame_k[j])
@@ -533,6 +535,24 @@ def _export_type(key: str, groundtruth_msg: str) -> str:
     if key == "vicon":
         return _TYPES["pose"]
     return _TYPES["tf"]
+
+
+def _latched_qos() -> tuple[Any, ...]:
+    """ROS 2's equivalent of a latched ROS 1 topic (what tf2's static broadcaster offers):
+    reliable, transient-local, keep last 1; so that ``ros2 bag play`` serves /tf_static to
+    late subscribers."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    never = QosTime(0, 0)
+    return (Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
+                never, never, QosLiveliness.AUTOMATIC, never, False),)
 
 
 def _open_writer(fmt: str, path: Path):
