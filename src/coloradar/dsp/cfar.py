@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from math import comb
+from typing import Literal
 
 import numpy as np
 from scipy import integrate, optimize, special, stats
@@ -35,8 +36,9 @@ from scipy.ndimage import correlate1d, rank_filter
 __all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "false_alarm_rate"]
 
 CFAR_KINDS = ("ca", "go", "so", "os")
-_MODES = {"wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"),
-          "reflect": ("reflect", "symmetric")}   # name -> (scipy.ndimage mode, np.pad mode)
+# name -> (scipy.ndimage mode, np.pad mode)
+_MODES: dict[str, tuple[str, Literal["wrap", "reflect", "symmetric"]]] = {
+    "wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"), "reflect": ("reflect", "symmetric")}
 
 
 @dataclass(frozen=True)
@@ -62,7 +64,7 @@ class CFARResult:
 
 
 def _per_axis(v: int | tuple[int, ...], ndim: int, what: str) -> tuple[int, ...]:
-    t = (int(v),) * ndim if np.isscalar(v) else tuple(int(x) for x in v)
+    t = tuple(int(x) for x in v) if isinstance(v, tuple | list | np.ndarray) else (int(v),) * ndim
     if len(t) != ndim or min(t) < 0:
         raise ValueError(f"{what} must be a non-negative int or one per axis ({ndim}), got {v!r}")
     return t

@@ -11,12 +11,13 @@ truth file are exact at every timestamp.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .paths import Path, Sinusoids
+from .paths import EllipsePath, LinePath, Path, Sinusoids
 
 __all__ = ["MOTION_PROFILES", "RigState", "RigTrajectory", "make_trajectory"]
 
@@ -170,7 +171,7 @@ def _random_sinusoids(rng: np.random.Generator, amplitude: float, band: tuple[fl
 
 
 def make_trajectory(path: Path, profile: str = "smooth",
-                    seed: int | np.random.Generator | None = 0) -> RigTrajectory:
+                    seed: int | Sequence[int] | np.random.Generator | None = 0) -> RigTrajectory:
     """A rig trajectory along ``path`` with the perturbations of a motion profile.
 
     Parameters
@@ -187,7 +188,7 @@ def make_trajectory(path: Path, profile: str = "smooth",
                          f"{', '.join(MOTION_PROFILES)}")
     spec = MOTION_PROFILES[profile]
     rng = np.random.default_rng(seed)
-    if spec["speed_factor"] != 1.0 and hasattr(path, "speed"):
+    if spec["speed_factor"] != 1.0 and isinstance(path, EllipsePath | LinePath):
         path = replace(path, speed=path.speed * spec["speed_factor"])
     amps, band = spec["offset"]
     offset = tuple(_random_sinusoids(rng, a, band) for a in amps)
