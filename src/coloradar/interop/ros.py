@@ -685,7 +685,7 @@ def _resolve_tf(edges: Mapping[str, tuple[str, SE3]], frame: str, base: str) -> 
             return None
         seen.add(frame)
         parent, parent_T_frame = edges[frame]
-        pose = parent_T_frame @ pose  # type: ignore[assignment]
+        pose = parent_T_frame @ pose
         frame = parent
     return pose
 
@@ -852,7 +852,7 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
                 poses = np.array(rows[stream])
                 if relative_poses and poses.shape[0]:
                     first = SE3.from_pose(poses[0]).inverse()
-                    poses = np.array([(first @ SE3.from_pose(p)).as_pose() for p in poses])  # type: ignore[union-attr]
+                    poses = np.array([(first @ SE3.from_pose(p)).as_pose() for p in poses])
                 write_poses(partial / stream / f"{stream}_poses.txt", poses)
         (partial / ".coloradar_import").write_text(f"imported from {bag}\n", encoding="utf-8")
         # Extrinsics: each stream's frame, plus any tf frame named like a coloradar sensor.
