@@ -59,8 +59,8 @@ def test_layout_ids_and_timestamps(run_dir, processed):
     calib = load_calibration(run_dir.parent / "calib")
     seq = open_sequence(run_dir)
     out = open_sequence(processed, calib=calib)
-    assert sorted(out.available()) == ["cascade/heatmaps", "single_chip/heatmaps",
-                                       "single_chip/pointclouds"]
+    assert sorted(out.available()) == ["cascade/heatmaps", "cascade/pointclouds",
+                                       "single_chip/heatmaps", "single_chip/pointclouds"]
     assert sorted(p.name for p in (processed / "cascade" / "pointclouds" / "data").iterdir()) == [
         "radar_pointcloud_0.bin", "radar_pointcloud_1.bin"]
     assert sorted(p.name for p in (processed / "single_chip" / "heatmaps" / "data").iterdir()) == [
