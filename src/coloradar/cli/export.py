@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 
 from ..dataset import open_sequence
-from ..errors import ColoradarError
 from ..interop.ros import DEFAULT_TOPICS, GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, ROS_FORMATS, export_bag
 from ..progress import Progress
 from ._common import new_output_file
@@ -45,14 +44,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--topic", type=_topic, action="append", default=[], metavar="STREAM=/TOPIC",
                    help="rename a stream's topic, e.g. lidar/pointclouds=/os1/points "
                         "(repeatable; defaults: " + ", ".join(f"{k}={v}" for k, v in
-                                                              DEFAULT_TOPICS.items()) + ")")
+                                                          DEFAULT_TOPICS.items()) + ")")
     p.add_argument("--radar-points", choices=RADAR_POINT_SOURCES, default="auto",
                    help="radar points from the run's own point clouds (shipped), computed from "
                         "ADC frames or from heatmaps; auto (default): shipped, else adc, else "
                         "heatmaps")
     p.add_argument("--set", dest="settings", type=_setting, action="append", default=[],
                    metavar="NAME=VALUE", help="a coloradar.dsp.ProcessingSettings field for "
-                                              "points computed from ADC (repeatable)")
+                                          "points computed from ADC (repeatable)")
     p.add_argument("--groundtruth-msg", choices=GROUNDTRUTH_MSGS, default="odometry",
                    help="nav_msgs/Odometry (default) or geometry_msgs/PoseStamped")
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
@@ -62,23 +61,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    streams = None
-    if args.streams:
-        streams = [s.strip() for s in args.streams.split(",") if s.strip()]
-        bad = [s for s in streams if s not in DEFAULT_TOPICS]
-        if bad:
-            raise ColoradarError(f"unknown stream(s) {', '.join(bad)}; expected some of "
-                                 f"{', '.join(DEFAULT_TOPICS)}")
+    streams = [s.strip() for s in args.streams.split(",") if s.strip()] if args.streams else None
     new_output_file(args.out, args.overwrite)  # fail before reading anything
     seq = open_sequence(args.run, calib=args.calib)
     prog = Progress(0, f"{seq.name} -> {args.format}", unit="messages", enabled=not args.quiet)
-    try:
-        res = export_bag(seq, args.out, args.format, streams=streams, topics=dict(args.topic),
-                         radar_points=args.radar_points, groundtruth_msg=args.groundtruth_msg,
-                         processing=dict(args.settings) or None, overwrite=args.overwrite,
-                         progress=prog)
-    finally:
-        prog.close()
+    res = export_bag(seq, args.out, args.format, streams=streams, topics=dict(args.topic),
+                     radar_points=args.radar_points, groundtruth_msg=args.groundtruth_msg,
+                     processing=dict(args.settings) or None, overwrite=args.overwrite,
+                     progress=prog)
+    prog.close()  # only on success: a failed command shows its error, not an empty bar
     sec = max(res.seconds, 1e-9)
     print(f"{res.path}: {args.format} bag, {res.messages} messages ({res.frames} point clouds) "
           f"in {res.seconds:.1f} s ({res.messages / sec:.0f} messages/s, "

@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "repeatable; without any, the topics 'coloradar export' writes")
     p.add_argument("--name", help="run folder name (default: the bag's name)")
     p.add_argument("--calib", help="calib folder whose radar configurations OUT/calib gets "
-                                   "(default: the built-in presets); extrinsics come from /tf_static")
+                               "(default: the built-in presets); extrinsics come from /tf_static")
     p.add_argument("--base-frame", default="base", help="tf frame of the rig's base (default base)")
     p.add_argument("--time", dest="time_source", choices=("header", "bag"), default="header",
                    help="message header stamps (default) or bag record times")
@@ -47,13 +47,11 @@ def run(args: argparse.Namespace) -> int:
         raise ColoradarError("give the dataset root OUT to import into (or --list)")
     topics = parse_topic_map(args.topic) if args.topic else None
     prog = Progress(0, "import", unit="messages", enabled=not args.quiet)
-    try:
-        res = import_bag(args.bag, args.out, name=args.name, topics=topics, calib=args.calib,
-                         base_frame=args.base_frame, time_source=args.time_source,
-                         relative_poses=args.relative_poses, overwrite=args.overwrite,
-                         progress=prog)
-    finally:
-        prog.close()
+    res = import_bag(args.bag, args.out, name=args.name, topics=topics, calib=args.calib,
+                     base_frame=args.base_frame, time_source=args.time_source,
+                     relative_poses=args.relative_poses, overwrite=args.overwrite,
+                     progress=prog)
+    prog.close()  # only on success: a failed command shows its error, not an empty bar
     print(f"{res.run_path}: run imported from {args.bag} in {res.seconds:.1f} s")
     for stream, n in res.counts.items():
         print(f"  {stream:<24} {n:>7}  from {res.topics[stream]}")
