@@ -45,7 +45,7 @@ from .calib import (
     parse_waveform_cfg,
 )
 from .dataset import FrameStream, Sequence, open_sequence
-from .errors import ColoradarError, MissingDataError
+from .errors import MissingDataError, SettingsError
 
 __all__ = [
     "get_adc_frame",
@@ -254,7 +254,7 @@ def get_cascade_params(calib_dir: PathLike) -> Params:
 def _radar_of(params: Params) -> str:
     radar = params.get("sensor_type")
     if radar not in ("cascade", "single_chip"):
-        raise ColoradarError(f"expected the params of a radar (sensor_type cascade or single_chip), "
+        raise SettingsError(f"expected the params of a radar (sensor_type cascade or single_chip), "
                              f"got sensor_type {radar!r}")
     return str(radar)
 
@@ -300,7 +300,7 @@ def get_timestamps(seq_dir: PathLike, params: Params) -> list[float]:
         product = {"adc_samples": "adc", "heatmap": "heatmaps", "pointcloud": "pointclouds"}.get(
             str(params.get("data_type")))
         if product is None:
-            raise ColoradarError(f"unknown data_type {params.get('data_type')!r}; expected "
+            raise SettingsError(f"unknown data_type {params.get('data_type')!r}; expected "
                                  "adc_samples, heatmap or pointcloud")
         t = getattr(rs, product).timestamps
     return [float(v) for v in t]

@@ -49,7 +49,7 @@ import numpy as np
 from .calib import Calibration
 from .dataset import Dataset, Sequence, open_dataset, open_sequence
 from .dataset.dataset import is_run_folder
-from .errors import ColoradarError, MissingDataError
+from .errors import FrameIndexError, MissingDataError, MissingDependencyError, SettingsError
 from .geometry import SE3, Trajectory, nearest_indices, sensor_to_base, trajectory_from_groundtruth
 
 __all__ = ["PRODUCTS", "SyncedSamples", "collate_numpy", "collate_torch", "split_runs",
@@ -91,7 +91,7 @@ def _sequences(source: Any, calib: Calibration | str | os.PathLike[str] | None,
     else:
         seqs = list(source)
         if not all(isinstance(s, Sequence) for s in seqs):
-            raise ColoradarError("source must be a run, a dataset, a path or a list of runs")
+            raise SettingsError("source must be a run, a dataset, a path or a list of runs")
     if runs is not None:
         wanted = list(runs)
         have = {s.name: s for s in seqs}
@@ -146,10 +146,10 @@ class SyncedSamples:
         self.radar = radar
         self.products = tuple(products)
         if not self.products or any(p not in PRODUCTS for p in self.products):
-            raise ColoradarError(f"products must be some of {', '.join(PRODUCTS)}, got "
+            raise SettingsError(f"products must be some of {', '.join(PRODUCTS)}, got "
                                  f"{', '.join(self.products) or 'none'}")
         if radar not in ("cascade", "single_chip"):
-            raise ColoradarError(f"unknown radar {radar!r}; expected cascade or single_chip")
+            raise SettingsError(f"unknown radar {radar!r}; expected cascade or single_chip")
         self.lidar = lidar
         self.pose_source = pose_source
         self._options = dict(radar=radar, products=self.products, lidar=lidar,
@@ -225,7 +225,7 @@ class SyncedSamples:
     def _find(self, i: int) -> tuple[int, int]:
         n = len(self)
         if not -n <= int(i) < n:
-            raise IndexError(f"sample {i} out of range ({n} samples)")
+            raise FrameIndexError(f"sample {i} out of range ({n} samples)")
         i = int(i) % n
         r = int(np.searchsorted(self._offsets, i, side="right") - 1)
         return r, i - int(self._offsets[r])
@@ -312,7 +312,7 @@ def split_runs(runs: Iterable[str], fractions: Mapping[str, float] | None = None
     """
     fr = dict(fractions or {"train": 0.8, "val": 0.1, "test": 0.1})
     if not fr or any(v < 0 for v in fr.values()) or sum(fr.values()) <= 0:
-        raise ColoradarError(f"fractions must be non-negative with a positive sum, got {fr}")
+        raise SettingsError(f"fractions must be non-negative with a positive sum, got {fr}")
     names = sorted(set(runs))
     order = np.random.default_rng(seed).permutation(len(names))
     shares = np.array(list(fr.values()), dtype=np.float64) / sum(fr.values())
@@ -390,7 +390,7 @@ def torch_dataset(view: SyncedSamples) -> Any:
         import torch
         from torch.utils.data import Dataset as TorchDataset
     except ImportError:
-        raise ColoradarError("torch_dataset needs PyTorch (pip install torch)") from None
+        raise MissingDependencyError("torch_dataset needs PyTorch (pip install torch)") from None
     if _TORCH_CLASS is None:
 
         class TorchSyncedSamples(TorchDataset):

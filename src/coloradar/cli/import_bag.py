@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..errors import ColoradarError
+from ..errors import SettingsError
 from ..interop.ros import DEFAULT_TOPICS, import_bag, iter_topics, parse_topic_map
 from ..progress import Progress
 
@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{topic:<32} {mtype:<40} {n:>7}")
         return 0
     if args.out is None:
-        raise ColoradarError("give the dataset root OUT to import into (or --list)")
+        raise SettingsError("give the dataset root OUT to import into (or --list)")
     topics = parse_topic_map(args.topic) if args.topic else None
     prog = Progress(0, "import", unit="messages", enabled=not args.quiet)
     res = import_bag(args.bag, args.out, name=args.name, topics=topics, calib=args.calib,

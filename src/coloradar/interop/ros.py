@@ -49,7 +49,15 @@ from scipy.spatial.transform import Rotation
 
 from ..calib import Calibration, Extrinsic, load_calibration, write_calibration
 from ..dataset import STREAMS, Sequence
-from ..errors import ColoradarError, DataWarning, FormatError, MissingDataError, OutputExistsError
+from ..errors import (
+    ColoradarError,
+    DataWarning,
+    FormatError,
+    MissingDataError,
+    MissingDependencyError,
+    OutputExistsError,
+    SettingsError,
+)
 from ..formats import (
     write_imu,
     write_lidar_pointcloud,
@@ -119,7 +127,7 @@ def _rosbags():
     try:
         import rosbags  # noqa: F401
     except ImportError:  # pragma: no cover - depends on the environment
-        raise ColoradarError("ROS bags need the optional 'rosbags' package: "
+        raise MissingDependencyError("ROS bags need the optional 'rosbags' package: "
                              "pip install 'coloradar[ros]'") from None
 
 
@@ -406,27 +414,27 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
     """
     _rosbags()
     if fmt not in ROS_FORMATS:
-        raise ColoradarError(f"unknown bag format {fmt!r}; expected ros1 or ros2")
+        raise SettingsError(f"unknown bag format {fmt!r}; expected ros1 or ros2")
     if radar_points not in RADAR_POINT_SOURCES:
-        raise ColoradarError(f"unknown radar point source {radar_points!r}; expected one of "
+        raise SettingsError(f"unknown radar point source {radar_points!r}; expected one of "
                              f"{', '.join(RADAR_POINT_SOURCES)}")
     if groundtruth_msg not in GROUNDTRUTH_MSGS:
-        raise ColoradarError(f"unknown ground-truth message {groundtruth_msg!r}; expected "
+        raise SettingsError(f"unknown ground-truth message {groundtruth_msg!r}; expected "
                              "odometry or pose")
     topic_of = {**DEFAULT_TOPICS, **dict(topics or {})}
     unknown = set(topic_of) - set(DEFAULT_TOPICS)
     if unknown:
-        raise ColoradarError(f"unknown stream(s) {', '.join(sorted(unknown))} in the topic map; "
+        raise SettingsError(f"unknown stream(s) {', '.join(sorted(unknown))} in the topic map; "
                              f"known: {', '.join(DEFAULT_TOPICS)}")
     out = Path(out)
     _check_bag_target(out, fmt, overwrite)
     asked = list(streams) if streams is not None else None
     for s in asked or ():
         if s not in DEFAULT_TOPICS:
-            raise ColoradarError(f"unknown stream {s!r}; expected some of {', '.join(DEFAULT_TOPICS)}")
+            raise SettingsError(f"unknown stream {s!r}; expected some of {', '.join(DEFAULT_TOPICS)}")
     used_topics = [topic_of[s] for s in (asked or DEFAULT_TOPICS)]
     if len(set(used_topics)) != len(used_topics):
-        raise ColoradarError(f"two streams share one topic: {', '.join(used_topics)}")
+        raise SettingsError(f"two streams share one topic: {', '.join(used_topics)}")
 
     result = ExportResult(out, fmt)
     have = set(seq.available())
@@ -616,11 +624,11 @@ def parse_topic_map(items: Iterable[str]) -> dict[str, str]:
     for item in items:
         topic, sep, stream = item.partition("=")
         if not sep or not topic.strip() or not stream.strip():
-            raise ColoradarError(f"topic map entry {item!r}: expected TOPIC=STREAM, e.g. "
+            raise SettingsError(f"topic map entry {item!r}: expected TOPIC=STREAM, e.g. "
                                  "/os1/points=lidar/pointclouds")
         stream = stream.strip()
         if stream not in DEFAULT_TOPICS:
-            raise ColoradarError(f"topic map entry {item!r}: unknown stream {stream!r}; expected "
+            raise SettingsError(f"topic map entry {item!r}: unknown stream {stream!r}; expected "
                                  f"one of {', '.join(DEFAULT_TOPICS)}")
         out[topic.strip()] = stream
     return out
@@ -739,7 +747,7 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
     from rosbags.highlevel import AnyReader
 
     if time_source not in ("header", "bag"):
-        raise ColoradarError(f"unknown time source {time_source!r}; expected header or bag")
+        raise SettingsError(f"unknown time source {time_source!r}; expected header or bag")
     bag = Path(bag)
     paths = _bag_paths(bag)
     root = Path(out)
@@ -753,11 +761,11 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
     topic_map = dict(topics) if topics is not None else {v: k for k, v in DEFAULT_TOPICS.items()}
     for stream in topic_map.values():
         if stream not in DEFAULT_TOPICS:
-            raise ColoradarError(f"unknown stream {stream!r}; expected one of "
+            raise SettingsError(f"unknown stream {stream!r}; expected one of "
                                  f"{', '.join(DEFAULT_TOPICS)}")
     dup = [s for s in set(topic_map.values()) if list(topic_map.values()).count(s) > 1]
     if dup:
-        raise ColoradarError(f"several topics map to {', '.join(dup)}; give one topic per stream")
+        raise SettingsError(f"several topics map to {', '.join(dup)}; give one topic per stream")
 
     start = time.perf_counter()
     result = ImportResult(final, root / "calib")
