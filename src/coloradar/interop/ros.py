@@ -48,7 +48,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..calib import Calibration, Extrinsic, load_calibration, write_calibration
-from ..dataset import STREAMS, Sequence
+from ..dataset import Sequence
 from ..errors import (
     ColoradarError,
     DataWarning,
@@ -65,6 +65,7 @@ from ..formats import (
     write_radar_pointcloud,
     write_timestamps,
 )
+from ..formats.layout import COLORADAR
 from ..geometry import SE3
 from .pointcloud2 import CloudLayout, decode_cloud, encode_cloud
 
@@ -851,17 +852,16 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
             if t.size > 1 and np.any(np.diff(t) <= 0):
                 warnings.warn(f"{bag}: {stream} times do not always increase (kept in bag order)",
                               DataWarning, stacklevel=2)
-            folder = _time_folder(stream)
-            write_timestamps(partial / folder / "timestamps.txt", t)
+            write_timestamps(partial / _timestamps_rel(stream), t)
             result.counts[stream] = int(t.size)
             if stream == "imu":
-                write_imu(partial / "imu" / "imu_data.txt", np.array(rows[stream]))
+                write_imu(partial / COLORADAR.tables["imu"].path, np.array(rows[stream]))
             elif stream in ("groundtruth", "vicon"):
                 poses = np.array(rows[stream])
                 if relative_poses and poses.shape[0]:
                     first = SE3.from_pose(poses[0]).inverse()
                     poses = np.array([(first @ SE3.from_pose(p)).as_pose() for p in poses])
-                write_poses(partial / stream / f"{stream}_poses.txt", poses)
+                write_poses(partial / COLORADAR.tables[stream].path, poses)
         (partial / ".coloradar_import").write_text(f"imported from {bag}\n", encoding="utf-8")
         # Extrinsics: each stream's frame, plus any tf frame named like a coloradar sensor.
         sensor_frames = {_sensor(s): f for s, f in frame_ids.items() if f and _sensor(s)}
@@ -902,13 +902,14 @@ def _sensor(stream: str) -> str:
             "single_chip/pointclouds": "single_chip", "imu": "imu"}.get(stream, "")
 
 
-def _time_folder(stream: str) -> str:
-    return STREAMS[stream][0] if stream in STREAMS else stream
+def _timestamps_rel(stream: str) -> str:
+    if stream in COLORADAR.frames:
+        return COLORADAR.frame(stream).timestamps_path
+    return COLORADAR.tables[stream].timestamps_path
 
 
 def _frame_rel(stream: str, k: int) -> str:
-    _, data_dir, prefix = STREAMS[stream]
-    return f"{data_dir}/{prefix}_{k}.bin"
+    return COLORADAR.frame(stream).frame_path(k)
 
 
 def iter_topics(bag: str | os.PathLike[str]) -> Iterator[tuple[str, str, int]]:
