@@ -98,7 +98,7 @@ def test_extrinsics_match_calibration_files(real_calib):
     for sensor, ext in real_calib.transforms.items():
         np.testing.assert_allclose(sensor_to_base(real_calib, sensor).matrix(), ext.matrix(),
                                    atol=1e-12)
-    # DESIGN.md §3: the radars' boresight (x) points along the rig's forward axis (base +y),
+    # docs/conventions.md §3: the radars' boresight (x) points along the rig's forward axis (base +y),
     # and their y (left) along base -x.
     for radar in ("cascade", "single_chip"):
         b_T_r = sensor_to_base(real_calib, radar)

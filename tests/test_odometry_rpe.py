@@ -3,6 +3,8 @@ against brute-force loops written from the rules' statements, and against hand-c
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -41,7 +43,7 @@ def _brute_evo_consecutive(p, d):
         if acc >= d:
             ends.append(k)
             acc = 0.0
-    return list(zip(ends[:-1], ends[1:], strict=True))
+    return list(itertools.pairwise(ends))
 
 
 def _brute_evo_all_pairs(p, d, rel_tol=0.1):

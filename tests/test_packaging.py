@@ -41,3 +41,24 @@ def test_license_file_matches_declared_licence():
     assert text.startswith("MIT License")
     assert "coloradar contributors" in text
     assert _pyproject()["project"]["license"] == {"text": "MIT"}
+
+
+def _project_texts():
+    for folder in ("src", "tests", "docs", "benchmarks"):
+        for p in (ROOT / folder).rglob("*"):
+            if p.suffix in (".py", ".md") and p.is_file():
+                yield p
+    yield ROOT / "README.md"
+
+
+def test_citations_point_at_sections_of_docs_conventions():
+    sections = set(re.findall(r"^## (\d+)\. ", (ROOT / "docs" / "conventions.md").read_text(
+        encoding="utf-8"), flags=re.M))
+    assert sections == {"1", "2", "3", "4"}
+    cited = set()
+    for p in _project_texts():
+        text = p.read_text(encoding="utf-8")
+        # The design notes the project started from are not shipped; cite our own document.
+        assert "DESIGN" + ".md" not in text, p
+        cited |= set(re.findall(r"conventions(?:\.md)? §(\d+)", text))
+    assert cited and cited <= sections

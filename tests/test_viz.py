@@ -139,7 +139,7 @@ def test_heatmap_points_are_the_strong_cells_in_radar_coordinates():
     pts = heatmap_points(hm, cfg, max_points=5, dynamic_range=10)
     assert pts.shape == (1, 5)
     rng, az, el = cfg.range_bins[r], cfg.azimuth_bins[a], cfg.elevation_bins[e]
-    # DESIGN.md §3: (R cos el cos az, R cos el sin az, R sin el), azimuth positive toward +y.
+    # docs/conventions.md §3: (R cos el cos az, R cos el sin az, R sin el), azimuth positive toward +y.
     expect = rng * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
     np.testing.assert_allclose(pts[0, :3], expect, atol=1e-5)
     assert pts[0, 4] == 0.5

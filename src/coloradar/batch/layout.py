@@ -141,7 +141,7 @@ def timestamps_text(frame_ids: np.ndarray, timestamps: np.ndarray, written: np.n
     """Timestamps file for the frames ``written`` of a stream with these frames.
 
     Readers pair line ``j`` with frame ``base + j``, ``base`` being 1 when the first file is
-    number 1 and 0 otherwise (DESIGN.md §1), so the lines run from that base to the last
+    number 1 and 0 otherwise (docs/conventions.md §1), so the lines run from that base to the last
     written frame; frames without an ADC timestamp read ``nan``.
 
     Parameters

@@ -42,7 +42,7 @@ STREAMS: dict[str, tuple[str, str, str]] = {
                                 "radar_pointcloud"),
     "lidar/pointclouds": ("lidar", "lidar/pointclouds", "lidar_pointcloud"),
 }
-"""Layout of the frame streams inside a run (DESIGN.md §1)."""
+"""Layout of the frame streams inside a run (docs/conventions.md §1)."""
 
 
 def _decode_adc(shape, buf, name):

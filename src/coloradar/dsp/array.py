@@ -1,6 +1,6 @@
 """Stage 5: the MIMO virtual array on the heatmap's azimuth × elevation FFT grid.
 
-Physics (DESIGN.md §3, :mod:`coloradar.sim.radar_if`): a virtual element at ``(p, q)`` half
+Physics (docs/conventions.md §3, :mod:`coloradar.sim.radar_if`): a virtual element at ``(p, q)`` half
 wavelengths of ``F_design`` sees a far target in direction ``u = (u_x, u_y, u_z)`` with phase
 ``exp(−jπ·ρ·(s_a·p·u_y + s_e·q·u_z))`` relative to the origin, where ``ρ = f_c/F_design``
 (carrier at mid-sampling over design frequency), ``u_y = cos(el)·sin(az)``, ``u_z = sin(el)``
@@ -137,7 +137,7 @@ def angle_grid(antenna: AntennaConfig, carrier_frequency: float, num_el: int, nu
     num_el, num_az
         Output bins (the heatmap's, or more for finer detection angles).
     azimuth_sign, elevation_sign
-        +1 or −1 (DESIGN.md §3).
+        +1 or −1 (docs/conventions.md §3).
     """
     if azimuth_sign not in (1, -1) or elevation_sign not in (1, -1):
         raise ValueError("azimuth_sign and elevation_sign must be +1 or -1")

@@ -54,7 +54,7 @@ def remove_dc(adc: np.ndarray) -> np.ndarray:
 
 
 def phase_frequency_factors(pf: PhaseFrequencyCalib, waveform: WaveformConfig) -> np.ndarray:
-    """Per-channel, per-sample factors that apply the cascade calibration (DESIGN.md §2).
+    """Per-channel, per-sample factors that apply the cascade calibration (docs/conventions.md §2).
 
     ``G[t, r, n] = P[0,0]/P[t,r] · exp(−j2π (f[t,r] − f[0,0]) · (S/S_cal)·(fs_cal/fs) · n/Ns)``:
     the frequency term moves every channel's beat frequency onto the reference channel's

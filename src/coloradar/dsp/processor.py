@@ -8,7 +8,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
       − coupling signal            (cube.coupling_signal: subtracting it = subtracting the file's
                                     unwindowed range FFT)
       − mean per chirp             (DC removal, optional)
-      × G[t, r, n]                 (cascade phase/frequency calibration, DESIGN.md §2)
+      × G[t, r, n]                 (cascade phase/frequency calibration, docs/conventions.md §2)
       × range window × Doppler window × (−1)^c    (unit coherent gain; (−1)^c = fftshift)
       → range FFT, keep the first num_range_bins → Doppler FFT
       × exp(−j2π k t/(n·Ntx))      (TDM-MIMO compensation)            = range_doppler(adc)
@@ -66,7 +66,7 @@ class ProcessingSettings:
     overlap
         Virtual pairs sharing a position: ``"first"`` (TX-major first pair) or ``"average"``.
     azimuth_sign, elevation_sign
-        +1 when the antenna file's az (el) axis grows toward +y (+z) (DESIGN.md §3); −1 mirrors.
+        +1 when the antenna file's az (el) axis grows toward +y (+z) (docs/conventions.md §3); −1 mirrors.
     cfar_kind, cfar_guard, cfar_train, pfa, cfar_rank
         CFAR on the range–Doppler power map; guard/train are (Doppler, range) half-widths;
         ``pfa`` the false-alarm probability per cell for noise (the map sums Ntx·Nrx channels,

@@ -1,6 +1,6 @@
 """Physics forward model of a TDM-MIMO FMCW radar: point scatterers -> raw ADC frame.
 
-The IF (beat) signal of TI's complex baseband (DESIGN.md §3) for a scatterer with round-trip
+The IF (beat) signal of TI's complex baseband (docs/conventions.md §3) for a scatterer with round-trip
 delay τ is ``exp(+j2π(S·τ·t + f0·τ))``: a longer delay is a higher beat frequency and a larger
 phase. For scatterer k, TX t, RX r, chirp loop c and sample n::
 
@@ -143,7 +143,7 @@ def synthesize_adc(
 def apply_channel_errors(adc: np.ndarray, errors: PhaseFrequencyCalib) -> np.ndarray:
     """Impose the per-channel errors that a cascade phase/frequency calibration describes.
 
-    Channel (t, r) gets the delay and complex gain that the calibration removes (DESIGN.md §2):
+    Channel (t, r) gets the delay and complex gain that the calibration removes (docs/conventions.md §2):
     ``x[n] · (P[t,r]/P[0,0]) · exp(+j2π (f[t,r] − f[0,0]) · n / Ns)``, assuming the capture's
     slope and sampling rate equal the frame's. Applying this and then the calibration gives the
     input back.

@@ -1,6 +1,6 @@
 """Write a complete simulated ColoRadar run: ``OUT/calib`` and ``OUT/<run name>``.
 
-The run has the dataset's layout (DESIGN.md §1), frames numbered from 0, every file written
+The run has the dataset's layout (docs/conventions.md §1), frames numbered from 0, every file written
 atomically, the run folder itself assembled as ``OUT/.<name>.partial`` and renamed into place
 at the end (an interrupted simulation leaves no half run behind). Streams and rates:
 

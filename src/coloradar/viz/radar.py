@@ -2,7 +2,7 @@
 
 Every function takes arrays plus their axes (bin centres in metres, radians, m/s) and returns a
 :class:`matplotlib.figure.Figure`; save it with :func:`coloradar.viz.save_figure`. Images are
-drawn so that the radar's left (+y, positive azimuth, DESIGN.md §3) is on the picture's left,
+drawn so that the radar's left (+y, positive azimuth, docs/conventions.md §3) is on the picture's left,
 as seen from behind the sensor, and range grows upward.
 """
 

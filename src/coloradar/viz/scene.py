@@ -65,7 +65,7 @@ def heatmap_points(heatmap: np.ndarray, config: HeatmapConfig, *, max_points: in
     Returns
     -------
     numpy.ndarray
-        float32 ``(K, 5)``: x y z [m] (radar frame, DESIGN.md §3), intensity, range rate [m/s].
+        float32 ``(K, 5)``: x y z [m] (radar frame, docs/conventions.md §3), intensity, range rate [m/s].
     """
     hm = np.asarray(heatmap, dtype=np.float32)
     inten = hm[..., 0].copy()
