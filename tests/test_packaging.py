@@ -62,3 +62,12 @@ def test_citations_point_at_sections_of_docs_conventions():
         assert "DESIGN" + ".md" not in text, p
         cited |= set(re.findall(r"conventions(?:\.md)? §(\d+)", text))
     assert cited and cited <= sections
+
+
+def test_ci_tests_the_oldest_declared_numpy_and_scipy():
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    for dep in _pyproject()["project"]["dependencies"]:
+        name, low = re.fullmatch(r"(numpy|scipy)>=([\d.]+)", dep).groups()
+        pinned = re.search(rf"OLDEST_{name.upper()}=([\d.]+)", ci).group(1)
+        # The CI pin is the newest patch release of the declared lowest minor version.
+        assert pinned.split(".")[:2] == low.split(".")[:2], (dep, pinned)

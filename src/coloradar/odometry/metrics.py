@@ -369,11 +369,14 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
     out = []
     for d in distances:
         i, j = rpe_pairs(dist, d, pairing, tolerance=tolerance)
-        te, re = _relative(est, i, j)
-        tr, rr = _relative(ref, i, j)
-        rr_inv = rr.inv()
-        err_t = np.linalg.norm(rr_inv.apply(te - tr), axis=1) if i.size else np.zeros(0)
-        err_r = np.degrees((rr_inv * re).magnitude()) if i.size else np.zeros(0)
+        if i.size:
+            te, re = _relative(est, i, j)
+            tr, rr = _relative(ref, i, j)
+            rr_inv = rr.inv()
+            err_t = np.linalg.norm(rr_inv.apply(te - tr), axis=1)
+            err_r = np.degrees((rr_inv * re).magnitude())
+        else:   # no pair (a run shorter than d); SciPy 1.11 cannot make an empty Rotation
+            err_t = err_r = np.zeros(0)
         out.append(RPEResult(float(d), est.timestamps[i], est.timestamps[j], err_t, err_r,
                              pairing))
     return out
