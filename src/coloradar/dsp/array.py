@@ -18,6 +18,7 @@ so the true bin angles are ``el_j = asin(u_z,j)`` and, in the ``el = 0`` plane,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
@@ -25,9 +26,12 @@ import scipy.fft as sfft
 from ..calib import AntennaConfig, VirtualArray
 from ..errors import CalibrationError
 
-__all__ = ["OVERLAP_MODES", "AngleGrid", "angle_grid", "beamform", "combine_channels", "sines_to_unit"]
+__all__ = ["OVERLAP_MODES", "AngleGrid", "OverlapMode", "angle_grid", "beamform", "combine_channels",
+           "sines_to_unit"]
 
-OVERLAP_MODES = ("first", "average")
+OverlapMode = Literal["first", "average"]
+"""Virtual pairs sharing a position: keep the TX-major first one, or average them."""
+OVERLAP_MODES: tuple[OverlapMode, ...] = get_args(OverlapMode)
 """How (TX, RX) pairs sharing a virtual position are combined."""
 
 
@@ -155,7 +159,8 @@ def angle_grid(antenna: AntennaConfig, carrier_frequency: float, num_el: int, nu
                      el_sines, az_sines)
 
 
-def combine_channels(cube: np.ndarray, virtual: VirtualArray, mode: str = "first") -> np.ndarray:
+def combine_channels(cube: np.ndarray, virtual: VirtualArray, mode: OverlapMode = "first"
+                     ) -> np.ndarray:
     """One signal per unique virtual position from a ``(tx, rx, ...)`` cube.
 
     Parameters

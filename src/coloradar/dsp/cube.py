@@ -23,7 +23,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from ..calib import CouplingCalib, PhaseFrequencyCalib, WaveformConfig
-from .windows import coherent_window
+from .windows import WindowName, coherent_window
 
 __all__ = [
     "apply_phase_frequency_calibration",
@@ -122,7 +122,7 @@ def coupling_taper(k: int) -> np.ndarray:
     return taper
 
 
-def range_fft(cube: np.ndarray, window: str = "hann", n: int | None = None,
+def range_fft(cube: np.ndarray, window: WindowName = "hann", n: int | None = None,
               keep: int | None = None, workers: int = 1) -> np.ndarray:
     """Windowed range FFT over samples, scaled to unit coherent gain.
 
@@ -155,7 +155,7 @@ def signed_doppler_bins(n: int) -> np.ndarray:
     return np.arange(n) - n // 2
 
 
-def doppler_fft(rcube: np.ndarray, window: str = "hann", n: int | None = None,
+def doppler_fft(rcube: np.ndarray, window: WindowName = "hann", n: int | None = None,
                 axis: int = -2, workers: int = 1) -> np.ndarray:
     """Windowed Doppler FFT over chirp loops, zero Doppler centred, unit coherent gain.
 

@@ -19,6 +19,8 @@ block of scatterers.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from ..calib import PhaseFrequencyCalib, RadarCalib
@@ -57,7 +59,7 @@ def synthesize_adc(
     rng: np.random.Generator | int | None = None,
     azimuth_sign: float = 1.0,
     elevation_sign: float = 1.0,
-    precision: str = "double",
+    precision: Literal["double", "single"] = "double",
     block: int = 1024,
 ) -> np.ndarray:
     """Synthesize one ADC frame of point scatterers (no quantisation, no channel errors).
