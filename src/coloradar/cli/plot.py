@@ -6,7 +6,7 @@ import argparse
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ._common import add_file_output_args, new_output_file
+from ._common import add_file_output_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -42,8 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..viz import frame_figure, save_figure
+    from ..viz._figure import check_image_path
 
-    out = new_output_file(args.out, args.overwrite)
+    out = check_image_path(args.out, args.overwrite)
     seq = open_sequence(args.run, calib=args.calib)
     fig = frame_figure(seq, args.view, args.frame, radar=args.radar, coords=args.coords,
                        scene_view=args.scene_view, stream=args.stream, extent=args.extent,

@@ -34,6 +34,9 @@ class StreamSummary:
     issues
         Inconsistencies found when reading (e.g. timestamp/frame count mismatch) or the error
         that prevented reading.
+    errors
+        How many of ``issues`` are errors (an unreadable stream, a malformed frame file) rather
+        than inconsistencies the readers work around.
     """
 
     name: str
@@ -44,6 +47,7 @@ class StreamSummary:
     gaps: list[tuple[int, float]] = field(default_factory=list)
     non_monotonic: int = 0
     issues: list[str] = field(default_factory=list)
+    errors: int = 0
 
 
 def summarize_timestamps(name: str, t: np.ndarray, gap_factor: float = 1.5) -> StreamSummary:
@@ -70,6 +74,7 @@ def summarize_sequence(seq: Sequence) -> list[StreamSummary]:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # reported through ``issues`` instead
+                bad = []
                 if key in ("imu", "groundtruth", "vicon"):
                     obj = getattr(seq, key)
                     ts, issues = obj.timestamps, obj.issues
@@ -77,10 +82,12 @@ def summarize_sequence(seq: Sequence) -> list[StreamSummary]:
                     sensor, product = key.split("/")
                     stream = getattr(getattr(seq, sensor), product)
                     ts, issues = stream.timestamps, stream.issues
+                    bad = stream.check_files()
             s = summarize_timestamps(key, ts)
-            s.issues = list(issues)
+            s.issues = list(issues) + bad
+            s.errors = len(bad)
         except ColoradarError as exc:
-            s = StreamSummary(key, issues=[f"unreadable: {exc}"])
+            s = StreamSummary(key, issues=[f"unreadable: {exc}"], errors=1)
         out.append(s)
     return out
 

@@ -11,7 +11,14 @@ from typing import SupportsIndex, overload
 
 import numpy as np
 
-from ..errors import DataWarning, FormatError, MissingDataError
+from ..errors import (
+    ColoradarError,
+    DataWarning,
+    FormatError,
+    FrameIndexError,
+    MissingDataError,
+    ReadError,
+)
 from ..formats.source import Source
 from ..formats.text import parse_imu, parse_poses, parse_timestamps
 
@@ -73,11 +80,53 @@ class FrameStream:
         rel = self._paths[self._index(k)]
         return self._decode(self._source.read_bytes(rel), self._source.describe(rel))
 
+    def versions(self) -> list[str]:
+        """For every frame, a short text that changes whenever its file is rewritten (size and
+        modification time, or a zip member's size, CRC and date; see
+        :meth:`~coloradar.formats.source.Source.version_key`). Nothing is read: what a
+        resumable job records to tell later which inputs changed since it ran."""
+        return [self._source.version_key(rel) for rel in self._paths]
+
+    def read_or_skip(self, k: int) -> np.ndarray | None:
+        """Frame ``k``, or None with a :class:`~coloradar.DataWarning` naming the file and what
+        is wrong when it cannot be read (malformed, not a regular file, vanished): what the
+        commands that walk many frames use, so that one bad frame is reported and skipped, as
+        ``coloradar process`` does, instead of ending the whole command."""
+        try:
+            return self.read(k)
+        except (FormatError, ReadError, MissingDataError) as exc:
+            warnings.warn(f"{exc}; {self.name} frame {k} skipped", DataWarning, stacklevel=2)
+            return None
+
+    def check_files(self) -> list[str]:
+        """Problems of the frame files, found without reading them: a file that is not a
+        regular file, or whose size its kind (and the calibration) does not allow.
+
+        Each distinct size is checked once, by decoding that many zero bytes with the stream's
+        own decoder (which checks sizes only), so the rule is the reader's. Returns one line
+        per problem (empty: every file has a size the reader accepts).
+        """
+        problems: list[str] = []
+        by_size: dict[int, list[str]] = {}
+        for rel in self._paths:
+            try:
+                by_size.setdefault(self._source.file_size(rel), []).append(rel)
+            except ColoradarError as exc:
+                problems.append(str(exc))
+        for size, rels in sorted(by_size.items()):
+            try:
+                self._decode(bytes(size), self._source.describe(rels[0]))
+            except FormatError as exc:
+                more = f" (and {len(rels) - 1} more file(s) of that size)" if len(rels) > 1 else ""
+                problems.append(f"{exc}{more}")
+        return problems
+
     def _index(self, k: int) -> int:
         k = operator.index(k)
         n = len(self._paths)
         if not -n <= k < n:
-            raise IndexError(f"{self.name}: frame {k} out of range (the stream has {n} frames)")
+            raise FrameIndexError(f"{self._source.location}: {self.name} frame {k} out of range "
+                                  f"(the stream has {n} frames: 0..{n - 1}, or -{n}..-1)")
         return k % n
 
     @overload

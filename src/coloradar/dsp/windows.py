@@ -12,6 +12,8 @@ from typing import Literal, get_args
 import numpy as np
 from scipy.signal import get_window
 
+from ..errors import SettingsError
+
 __all__ = ["WINDOWS", "WindowName", "coherent_window", "window"]
 
 WindowName = Literal["hann", "blackman", "none"]
@@ -35,7 +37,7 @@ def window(name: WindowName, n: int) -> np.ndarray:
         float64 ``(n,)``.
     """
     if name not in WINDOWS:
-        raise ValueError(f"unknown window {name!r}; expected one of {', '.join(WINDOWS)}")
+        raise SettingsError(f"unknown window {name!r}; expected one of {', '.join(WINDOWS)}")
     if name == "none":
         return np.ones(n)
     return get_window(name, n, fftbins=True).astype(np.float64)

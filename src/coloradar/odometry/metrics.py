@@ -42,7 +42,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..calib import Calibration
-from ..errors import ColoradarError
+from ..errors import ColoradarError, SettingsError
 from ..geometry import Trajectory, rig_velocity
 from .alignment import Alignment, umeyama_alignment
 from .velocity_track import EgoVelocityTrack
@@ -193,7 +193,7 @@ def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
     ATEResult
     """
     if align not in ALIGNMENTS:
-        raise ValueError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
+        raise SettingsError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
     est, ref = associate_trajectories(estimate, reference, max_gap)
     if align in ("se3", "sim3"):
         al = umeyama_alignment(est.translations, ref.translations, with_scale=align == "sim3")
@@ -302,9 +302,9 @@ def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_po
     dist = np.asarray(path, dtype=np.float64)
     d = float(distance)
     if not d > 0:
-        raise ValueError(f"RPE distances must be positive, got {distance}")
+        raise SettingsError(f"RPE distances must be positive, got {distance}")
     if pairing not in RPE_PAIRINGS:
-        raise ValueError(f"pairing must be one of {', '.join(RPE_PAIRINGS)}, got {pairing!r}")
+        raise SettingsError(f"pairing must be one of {', '.join(RPE_PAIRINGS)}, got {pairing!r}")
     n = dist.size
     # A hair of slack so that exact multiples of the pose spacing are not pushed one pose
     # further by rounding of the cumulative sum.
@@ -325,7 +325,7 @@ def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_po
         e = np.asarray(ends, dtype=np.int64)
         return e[:-1], e[1:]
     if not 0 <= tolerance < 1:
-        raise ValueError(f"tolerance must lie in [0, 1), got {tolerance!r}")
+        raise SettingsError(f"tolerance must lie in [0, 1), got {tolerance!r}")
     if n == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     target = dist + d

@@ -156,13 +156,24 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
         raise ColoradarError(f"{seq.name}: no {radar} {source} frames in the chosen window")
     cfg = config or ego_velocity_config(seq.calib.radar(radar))
 
-    def clouds() -> Iterator[np.ndarray]:
-        for k in idx:
-            frame = stream[int(k)]
-            yield frame if convert is None else convert(frame)
+    skipped: dict[int, str] = {}
 
-    return estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
-                                   frame=radar, progress=progress)
+    def clouds() -> Iterator[np.ndarray]:
+        for j, k in enumerate(idx):
+            frame = stream.read_or_skip(int(k))  # reported as a DataWarning
+            if frame is None:
+                # One bad frame gives no estimate for that frame, as `coloradar process`
+                # skips it; the track keeps its time so the trajectory bridges the gap.
+                skipped[j] = f"unreadable frame: {stream.path(int(k))}"
+                yield np.zeros((0, 5), dtype=np.float32)
+            else:
+                yield frame if convert is None else convert(frame)
+
+    track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
+                                    frame=radar, progress=progress)
+    for j, why in skipped.items():
+        track.reasons[j] = why
+    return track
 
 
 def run_path(seq) -> str:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..errors import SettingsError
 from .paths import EllipsePath, LinePath, Path, Sinusoids
 
 __all__ = ["MOTION_PROFILES", "RigState", "RigTrajectory", "make_trajectory"]
@@ -184,8 +185,8 @@ def make_trajectory(path: Path, profile: str = "smooth",
         Seed of the perturbations' random amplitudes, frequencies and phases.
     """
     if profile not in MOTION_PROFILES:
-        raise ValueError(f"unknown motion profile {profile!r}; expected one of "
-                         f"{', '.join(MOTION_PROFILES)}")
+        raise SettingsError(f"unknown motion profile {profile!r}; expected one of "
+                            f"{', '.join(MOTION_PROFILES)}")
     spec = MOTION_PROFILES[profile]
     rng = np.random.default_rng(seed)
     if spec["speed_factor"] != 1.0 and isinstance(path, EllipsePath | LinePath):

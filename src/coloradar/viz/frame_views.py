@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..calib import RadarCalib
-from ..errors import MissingDataError
+from ..errors import MissingDataError, SettingsError
 from .radar import HeatmapView, plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
 from .scene import _has, _run_start, plot_scene
 
@@ -79,7 +79,7 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str = "cascade",
         Clip range axes [m].
     """
     if view not in VIEWS:
-        raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
+        raise SettingsError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
     if view == "scene":
         return plot_scene(seq, index=index, stream=stream, frame=coords, view=scene_view,
                           extent=extent)

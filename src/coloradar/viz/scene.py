@@ -20,7 +20,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from ..calib import Calibration, HeatmapConfig
-from ..errors import MissingDataError
+from ..errors import MissingDataError, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base, trajectory_from_groundtruth
 from ._figure import new_figure
 
@@ -257,14 +257,16 @@ def gather_scene(seq, time: float, *, frame: str = "base",
             cache[key] = make()
         return cache[key]
 
-    def read(name: str, i: int) -> np.ndarray:
-        return cached(name, i, lambda: _stream(seq, name)[i])
+    def read(name: str, i: int) -> np.ndarray | None:
+        # A bad frame is reported once (DataWarning) and its sensor left out of the picture,
+        # so that an animation goes on, as `coloradar process` skips a bad frame.
+        return cached(name, i, lambda: _stream(seq, name).read_or_skip(i))
 
     if "lidar" in sensors and _has(seq, "lidar/pointclouds"):
         ts = _stream(seq, "lidar/pointclouds").timestamps
         i = _latest(ts, time, max_age)
-        if i is not None:
-            cloud = read("lidar/pointclouds", i)
+        cloud = None if i is None else read("lidar/pointclouds", i)
+        if i is not None and cloud is not None:
             step = max(1, int(np.ceil(len(cloud) / max_lidar_points)))
             pts = cloud[::step, :3]
             pts = pts[np.all(np.isfinite(pts), axis=1) & (np.abs(pts).sum(axis=1) > 0)]
@@ -278,10 +280,12 @@ def gather_scene(seq, time: float, *, frame: str = "base",
             continue
         ts = _stream(seq, name).timestamps
         i = _latest(ts, time, max_age)
-        if i is None:
+        frame_data = None if i is None else read(name, i)
+        if i is None or frame_data is None:
             continue
-        data = cached(f"{name}:points", i, lambda name=name, i=i, radar=radar: radar_points(
-            seq, radar, name, read(name, i), max_points=max_radar_points, cache=cache))
+        data = cached(f"{name}:points", i, lambda name=name, i=i, radar=radar, d=frame_data:
+                      radar_points(seq, radar, name, d, max_points=max_radar_points,
+                                   cache=cache))
         pose = framer.pose(radar, float(ts[i]))
         scene.radars[radar] = np.column_stack([pose.apply(data[:, :3].astype(np.float32)),
                                                data[:, 4]]).astype(np.float32)
@@ -358,7 +362,7 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
         if extent is not None and scene.rig is not None:
             scene = _clip_3d(scene, scene.rig[0], extent)
     else:
-        raise ValueError(f"view must be 'bev' or '3d', got {view!r}")
+        raise SettingsError(f"view must be 'bev' or '3d', got {view!r}")
     if scene.lidar is not None and len(scene.lidar):
         if view == "bev":
             u, v = uv(scene.lidar)
