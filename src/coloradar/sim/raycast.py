@@ -113,7 +113,7 @@ def cast_rays(origins: np.ndarray, directions: np.ndarray, rects: RectArrays,
         int64 ``(G, B)``: index of the rectangle hit, -1 for none.
     """
     if method not in ("auto", "sectors", "dense"):   # an unknown name would mean "dense"
-        raise ValueError(f"cast_rays: method must be 'auto', 'sectors' or 'dense', got {method!r}")
+        raise SettingsError(f"cast_rays: method must be 'auto', 'sectors' or 'dense', got {method!r}")
     o = np.asarray(origins, dtype=np.float64)
     d = np.asarray(directions, dtype=np.float64)
     g_count, b_count = d.shape[:2]
