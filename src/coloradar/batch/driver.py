@@ -36,6 +36,7 @@ from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError, DataWarning, MissingDataError, OutputExistsError, WriteError
 from ..formats import heatmap_nbytes
 from ..formats.atomic import make_output_dir, write_text_if_changed
+from ..formats.layout import LAYOUTS
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, make_executor
@@ -117,8 +118,11 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-_RUN_PARTS = ("cascade/adc_samples", "single_chip/adc_samples", "lidar", "imu", "groundtruth",
-              "vicon")
+# Folders of a run that ``process`` never writes: an output folder holding one is a run.
+_RUN_PARTS = tuple(dict.fromkeys(
+    m for lay in LAYOUTS.values() for m in lay.run_markers
+    if not any(m == s.folder for s in lay.frames.values()
+               if s.sensor in lay.radars and s.product in PRODUCTS)))
 
 
 def _check_target(t: RunTarget) -> None:

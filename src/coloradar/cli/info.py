@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if path.is_dir() and not is_run_folder(path):
         ds = open_dataset(path, calib=args.calib)
-        print(f"dataset {path}: {len(ds)} runs")
+        kind = "" if ds.layout.name == "coloradar" else f" ({ds.layout.title} layout)"
+        print(f"dataset {path}: {len(ds)} runs{kind}")
         bad = 0
         for name in ds.sequences:  # one bad run is reported, and the others still are
             try:
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
             except ColoradarError as exc:
                 print(f"run {name}: error: {exc}")
                 bad += 1
-        print(format_calibration_summary(ds.calib))
+        print(format_calibration_summary(ds))
         if bad:
             print(f"coloradar: error: {bad} of {len(ds)} runs have unreadable or malformed "
                   "files (marked ! above)", file=sys.stderr)

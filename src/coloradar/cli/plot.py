@@ -23,7 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", type=int, default=0,
                    help="frame index (of the radar's stream; for scene, of --stream)")
     p.add_argument("--out", required=True, help="output image (.png, .pdf, .svg)")
-    p.add_argument("--radar", default="cascade", choices=RADARS, help="which radar")
+    p.add_argument("--radar", choices=RADARS,
+                   help="which radar (default: cascade; for scene, both radars; a radar named "
+                        "for scene shows it alone, --frame counting its frames)")
     p.add_argument("--coords", default="base",
                    help="scene frame: base (default), world, or a sensor name (e.g. cascade)")
     p.add_argument("--scene-view", default="bev", choices=("bev", "3d"),

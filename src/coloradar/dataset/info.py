@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ColoradarError
+from ..formats.layout import COLORADAR
 from .sequence import Sequence
 
 __all__ = ["StreamSummary", "format_sequence_summary", "summarize_sequence", "summarize_timestamps"]
@@ -102,7 +103,8 @@ def _fmt_gaps(s: StreamSummary) -> str:
 def format_sequence_summary(seq: Sequence, summaries: list[StreamSummary] | None = None) -> str:
     """A human-readable table of ``seq``'s streams and calibration."""
     summaries = summarize_sequence(seq) if summaries is None else summaries
-    lines = [f"run {seq.name}  ({seq.location})"]
+    kind = "" if seq.layout.name == "coloradar" else f", {seq.layout.title} layout"
+    lines = [f"run {seq.name}  ({seq.location}{kind})"]
     header = f"  {'stream':<24}{'frames':>8}{'duration':>11}{'rate':>10}  gaps"
     lines.append(header)
     for s in summaries:
@@ -118,8 +120,11 @@ def format_sequence_summary(seq: Sequence, summaries: list[StreamSummary] | None
 def format_calibration_summary(seq_or_calib) -> str:
     """Calibration lines for ``info``: source and each radar's derived quantities."""
     calib = getattr(seq_or_calib, "calib", seq_or_calib)
+    layout = getattr(seq_or_calib, "layout", COLORADAR)
     lines = [f"calibration: {calib.source}"]
-    for name in ("cascade", "single_chip"):
+    for name in layout.radars:
         lines.append(f"  {name}: {calib.radar(name).summary()}")
-    lines.append(f"  transforms: {', '.join(sorted(calib.transforms)) or 'none'}")
+    shown = [t for t in sorted(calib.transforms)
+             if layout.name == COLORADAR.name or t in layout.transforms]
+    lines.append(f"  transforms: {', '.join(shown) or 'none'}")
     return "\n".join(lines)

@@ -151,14 +151,18 @@ _FRAME_RE = re.compile(r"^(?P<prefix>.+)_(?P<num>\d+)\.bin$")
 
 
 def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix: str,
-                      decode: Decoder) -> FrameStream:
-    """Index a stream of frame files ``<data_dir>/<prefix>_<i>.bin`` with ``<folder>/timestamps.txt``.
+                      decode: Decoder, *, timestamps: str = "timestamps.txt",
+                      first_frame: int = 0) -> FrameStream:
+    """Index a stream of frame files ``<data_dir>/<prefix>_<i>.bin`` with
+    ``<folder>/<timestamps>``.
 
-    Frame numbers may start at 0 (original release) or 1 (derived release). The ``i``-th
-    timestamp belongs to the file numbered ``base + i``. Timestamps without a file and files
-    without a timestamp are left out with a :class:`DataWarning` (and noted in ``issues``).
+    Frame numbers may start at 0 (original release) or 1 (derived release, ColoRadar+). The
+    ``i``-th timestamp belongs to the file numbered ``base + i``, ``base`` being the number of
+    the first file when it is 0 or 1, else the layout's ``first_frame``. Timestamps without a
+    file and files without a timestamp are left out with a :class:`DataWarning` (and noted in
+    ``issues``).
     """
-    ts = read_timestamps(src, f"{folder}/timestamps.txt")
+    ts = read_timestamps(src, f"{folder}/{timestamps}")
     if not src.is_dir(data_dir):
         raise MissingDataError(f"{src.describe(data_dir)}: frame folder not found")
     ids = []
@@ -167,7 +171,7 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
         if m and m["prefix"] == prefix:
             ids.append(int(m["num"]))
     ids_arr = np.array(sorted(ids), dtype=np.int64)
-    base = 0 if (ids_arr.size == 0 or ids_arr[0] == 0) else 1 if ids_arr[0] == 1 else 0
+    base = int(ids_arr[0]) if ids_arr.size and ids_arr[0] in (0, 1) else first_frame
     wanted = base + np.arange(ts.size, dtype=np.int64)
     has = np.isin(wanted, ids_arr)
     issues = []

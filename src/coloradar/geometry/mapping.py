@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MissingDataError, SettingsError
+from ..formats.layout import LAYOUTS
 from .frames import sensor_to_base
 from .se3 import SE3
 from .timesync import window_indices
@@ -16,9 +17,10 @@ from .trajectory import Trajectory, trajectory_from_groundtruth
 __all__ = ["MAP_SOURCES", "PointMap", "accumulate_clouds", "build_map",
            "voxel_downsample"]
 
-MAP_SOURCES = {"lidar": ("lidar", "pointclouds"), "single_chip": ("single_chip", "pointclouds"),
-               "cascade": ("cascade", "pointclouds")}
-"""Sensor name -> (sequence attribute, stream attribute) of the point-cloud streams."""
+MAP_SOURCES = {s.sensor: s.name for lay in LAYOUTS.values() for s in lay.frames.values()
+               if s.kind in ("lidar_points", "radar_points")}
+"""Sensor name -> its point-cloud stream (:mod:`coloradar.formats.layout`): ``lidar``,
+``cascade``, ``single_chip``."""
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float,
@@ -166,10 +168,14 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
     if sensor not in MAP_SOURCES:
         raise MissingDataError(f"no point clouds for {sensor!r}; expected one of "
                                f"{', '.join(MAP_SOURCES)}")
-    group, attr = MAP_SOURCES[sensor]
-    stream = getattr(getattr(seq, group, None), attr, None)
-    if stream is None:
-        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {group}/{attr} stream")
+    name = MAP_SOURCES[sensor]
+    if name not in seq.available():
+        hint = (" (radar point clouds that coloradar process wrote are read with "
+                "open_sequence(run, products=OUT), --products OUT)"
+                if sensor != "lidar" else "")
+        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {name} stream in this run "
+                               f"(present: {', '.join(seq.available()) or 'nothing'}){hint}")
+    stream = seq.stream(name)
     traj = trajectory if trajectory is not None else trajectory_from_groundtruth(seq)
     t0 = traj.start + start
     t1 = None if duration is None else t0 + duration
