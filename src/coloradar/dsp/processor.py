@@ -8,7 +8,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
       − coupling signal            (cube.coupling_signal: subtracting it = subtracting the file's
                                     unwindowed range FFT)
       − mean per chirp             (DC removal, optional)
-      × G[t, r, n]                 (cascade phase/frequency calibration, DESIGN.md §2)
+      × G[t, r, n]                 (cascade phase/frequency calibration, docs/conventions.md §2)
       × range window × Doppler window × (−1)^c    (unit coherent gain; (−1)^c = fftshift)
       → range FFT, keep the first num_range_bins → Doppler FFT
       × exp(−j2π k t/(n·Ntx))      (TDM-MIMO compensation)            = range_doppler(adc)
@@ -20,7 +20,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
@@ -29,15 +29,23 @@ from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
 from ..errors import FormatError, SettingsError
 from .angle import bartlett_spectrum, capon_spectrum, refine_peak
-from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
-from .cfar import CFAR_KINDS, cfar, cfar_scale, cfar_window
+from .array import OVERLAP_MODES, OverlapMode, angle_grid, combine_channels, sines_to_unit
+from .cfar import CFAR_KINDS, CFAREdge, CFARKind, cfar, cfar_scale, cfar_window
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import Detections, local_maxima
 from .heatmap import heatmap_from_elements
 from .tdm import tdm_phase
-from .windows import WINDOWS, coherent_window
+from .windows import WINDOWS, WindowName, coherent_window
 
-__all__ = ["ProcessingSettings", "RadarProcessor"]
+__all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "AngleMethod", "CouplingDomain", "ProcessingSettings",
+           "RadarProcessor"]
+
+CouplingDomain = Literal["raw", "calibrated"]
+"""What the coupling file is the range FFT of: uncalibrated or calibrated samples."""
+COUPLING_DOMAINS: tuple[CouplingDomain, ...] = get_args(CouplingDomain)
+AngleMethod = Literal["fft", "capon"]
+"""Detection angles by Bartlett (FFT) or Capon (MVDR) beamforming."""
+ANGLE_METHODS: tuple[AngleMethod, ...] = get_args(AngleMethod)
 
 
 @dataclass(frozen=True)
@@ -67,7 +75,7 @@ class ProcessingSettings:
     overlap
         Virtual pairs sharing a position: ``"first"`` (TX-major first pair) or ``"average"``.
     azimuth_sign, elevation_sign
-        +1 when the antenna file's az (el) axis grows toward +y (+z) (DESIGN.md §3); −1 mirrors.
+        +1 when the antenna file's az (el) axis grows toward +y (+z) (docs/conventions.md §3); −1 mirrors.
     cfar_kind, cfar_guard, cfar_train, pfa, cfar_rank
         CFAR on the range–Doppler power map; guard/train are (Doppler, range) half-widths;
         ``pfa`` the false-alarm probability per cell for noise (the map sums Ntx·Nrx channels,
@@ -88,35 +96,35 @@ class ProcessingSettings:
         frames belongs to the batch layer (one process per core).
     """
 
-    range_window: str = "hann"
-    doppler_window: str = "hann"
+    range_window: WindowName = "hann"
+    doppler_window: WindowName = "hann"
     range_fft_size: int | None = None
     doppler_fft_size: int | None = None
     num_range_bins: int | None = None
     dc_removal: bool = True
     phase_frequency_calibration: bool = True
     coupling_subtraction: bool = True
-    coupling_domain: str = "raw"
+    coupling_domain: CouplingDomain = "raw"
     tdm_compensation: bool = True
-    overlap: str = "first"
+    overlap: OverlapMode = "first"
     azimuth_sign: int = 1
     elevation_sign: int = 1
-    cfar_kind: str = "ca"
+    cfar_kind: CFARKind = "ca"
     cfar_guard: tuple[int, int] = (1, 2)
     cfar_train: tuple[int, int] = (2, 8)
     pfa: float = 1e-4
     cfar_rank: float = 0.75
     min_range: float = 0.3
     peak_grouping: bool = True
-    angle_method: str = "fft"
+    angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
     workers: int = 1
 
     def __post_init__(self) -> None:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
-                   "coupling_domain": ("raw", "calibrated"), "overlap": OVERLAP_MODES,
-                   "cfar_kind": CFAR_KINDS, "angle_method": ("fft", "capon"),
+                   "coupling_domain": COUPLING_DOMAINS, "overlap": OVERLAP_MODES,
+                   "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1)}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
@@ -357,7 +365,7 @@ class RadarProcessor:
     def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
         s = self.settings
         power = _power_sum(rd).astype(np.float64)
-        modes = ("wrap", "mirror")
+        modes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror")   # (Doppler, range)
         res = cfar(power, s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa, rank=s.cfar_rank,
                    looks=self._looks, mode=modes, split_axis=1)
         mask = res.detections
