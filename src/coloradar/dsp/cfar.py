@@ -20,6 +20,16 @@ Rohling 1983):
 
 GO, SO and OS are solved for ``α`` numerically. For several looks CA is an F-distribution
 quantile, ``Pfa = P(F(2L, 2NL) > α)``, and GO/SO/OS are integrated numerically.
+
+**Correlated training cells.** Windowed FFT bins are correlated (Hann: adjacent powers have
+correlation 0.44), so the mean of ``N`` training cells fluctuates more than that of ``N``
+independent ones, and a threshold computed for ``N`` fires too often. For complex Gaussian
+noise the powers of two bins ``Δ`` apart correlate by ``|ρ(Δ)|²``, ``ρ(Δ) = Σ w_k² e^{−j2πΔk/n}
+/ Σ w_k²`` (``w`` the window, ``n`` the FFT length); the mean of the training set ``T`` then has
+the variance of ``N_eff = N² / Σ_{i,j∈T} |ρ(i−j)|²`` independent cells
+(:func:`effective_train_cells`), and CA/GO/SO thresholds use ``N_eff`` (a Gamma
+approximation of the correlated mean, exact in its first two moments). ``looks`` and
+``num_train`` may therefore be non-integer.
 """
 
 from __future__ import annotations
@@ -32,7 +42,8 @@ import numpy as np
 from scipy import integrate, optimize, special, stats
 from scipy.ndimage import correlate1d, rank_filter
 
-__all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "false_alarm_rate"]
+__all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "effective_train_cells",
+           "false_alarm_rate", "power_correlation"]
 
 CFAR_KINDS = ("ca", "go", "so", "os")
 _MODES = {"wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"),
@@ -80,6 +91,75 @@ def cfar_window(guard: tuple[int, ...], train: tuple[int, ...], split_axis: int 
     return outer - inner, half_outer - half_inner
 
 
+def power_correlation(window: np.ndarray, fft_size: int, max_lag: int) -> np.ndarray:
+    """Correlation of noise powers ``|ρ(Δ)|²`` of FFT bins ``Δ = 0 … max_lag`` apart.
+
+    Parameters
+    ----------
+    window
+        float ``(n,)``: the taper applied before the FFT (any scale).
+    fft_size
+        FFT length (≥ ``n``; zero padding makes neighbouring bins more alike).
+    max_lag
+        Largest lag returned.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 ``(max_lag + 1,)``, 1 at lag 0.
+    """
+    w2 = np.asarray(window, dtype=np.float64) ** 2
+    k = np.arange(w2.size)
+    lags = np.arange(max_lag + 1)
+    rho = (w2[None, :] * np.exp(-2j * np.pi * lags[:, None] * k[None, :] / fft_size)).sum(1)
+    return np.abs(rho / w2.sum()) ** 2
+
+
+def effective_train_cells(guard: tuple[int, ...], train: tuple[int, ...],
+                          correlation: tuple[np.ndarray, ...], split_axis: int = -1,
+                          wrap: tuple[int | None, ...] | None = None) -> tuple[float, float]:
+    """Independent-cell equivalents ``N_eff`` of the training set and of one GO/SO half.
+
+    Parameters
+    ----------
+    guard, train
+        Half-widths per axis.
+    correlation
+        Per axis, ``|ρ(Δ)|²`` for ``Δ = 0, 1, …`` (:func:`power_correlation`); lags beyond
+        the array count as uncorrelated. The map's correlation is their product (separable
+        windows).
+    split_axis
+        GO/SO split axis.
+    wrap
+        Per axis, the axis length when it wraps (circular lags), else None.
+
+    Returns
+    -------
+    tuple
+        ``(N_eff, n_eff)`` as floats (``N²/Σ_{i,j}|ρ_ij|²`` over all / one half's cells).
+    """
+    nd = len(guard)
+    h = [g + t for g, t in zip(guard, train, strict=True)]
+    grids = np.meshgrid(*[np.arange(-x, x + 1) for x in h], indexing="ij")
+    offs = np.stack([gr.ravel() for gr in grids], axis=1)
+    inner = np.all(np.abs(offs) <= np.asarray(guard), axis=1)
+    ax = split_axis % nd
+    wraps = wrap or (None,) * nd
+
+    def n_eff(sel: np.ndarray) -> float:
+        o = offs[sel]
+        c = np.ones((len(o), len(o)))
+        for a in range(nd):
+            lag = np.abs(o[:, None, a] - o[None, :, a])
+            if wraps[a]:
+                lag = np.minimum(lag, int(wraps[a]) - lag)     # type: ignore[operator]
+            r = np.asarray(correlation[a], dtype=np.float64)
+            c *= np.where(lag < r.size, r[np.minimum(lag, r.size - 1)], 0.0)
+        return float(len(o) ** 2 / c.sum()) if len(o) else 0.0
+
+    return n_eff(~inner), n_eff(~inner & (offs[:, ax] < 0))
+
+
 def _os_rank(rank: float | int, n: int) -> int:
     if isinstance(rank, (int, np.integer)) and not isinstance(rank, bool) and rank >= 1:
         k = int(rank)
@@ -90,8 +170,8 @@ def _os_rank(rank: float | int, n: int) -> int:
     return k
 
 
-def false_alarm_rate(kind: str, scale: float, num_train: int, *, rank: int = 0,
-                     looks: int = 1, numeric: bool = False) -> float:
+def false_alarm_rate(kind: str, scale: float, num_train: float, *, rank: int = 0,
+                     looks: float = 1, numeric: bool = False) -> float:
     """False-alarm probability of a CFAR with multiplier ``scale`` on noise-only cells.
 
     Parameters
@@ -101,16 +181,20 @@ def false_alarm_rate(kind: str, scale: float, num_train: int, *, rank: int = 0,
     scale
         ``α``.
     num_train
-        ``N`` for CA and OS; cells per half ``n`` for GO and SO.
+        ``N`` for CA and OS; cells per half ``n`` for GO and SO (may be an effective,
+        non-integer count for CA/GO/SO).
     rank
         ``k`` (1-based) for OS.
     looks
-        Unit exponentials summed per cell (1 = square-law single look).
+        Unit exponentials summed per cell (1 = square-law single look; non-integer = Gamma).
     numeric
         Integrate numerically even where a closed form exists (to cross-check them).
     """
-    a, n, L = float(scale), int(num_train), int(looks)
-    if L == 1 and not numeric:
+    a, n, L = float(scale), float(num_train), float(looks)
+    if kind == "os":
+        n = round(n)
+    if L == 1 and not numeric and n == int(n):
+        n = int(n)
         if kind == "ca":
             return float((1.0 + a / n) ** (-n))
         if kind in ("so", "go"):
@@ -125,7 +209,7 @@ def false_alarm_rate(kind: str, scale: float, num_train: int, *, rank: int = 0,
     return _numeric_pfa(kind, a, n, rank, L)
 
 
-def _numeric_pfa(kind: str, a: float, n: int, k: int, L: int) -> float:
+def _numeric_pfa(kind: str, a: float, n: float, k: int, L: float) -> float:
     """``E[Q(L, α·Z)]`` over the distribution of the statistic ``Z`` (unit-exponential looks)."""
     if kind == "ca":                       # Z = mean of n cells: Gamma(nL, scale 1/n)
         g = stats.gamma(n * L, scale=1.0 / n)
@@ -140,6 +224,7 @@ def _numeric_pfa(kind: str, a: float, n: int, k: int, L: int) -> float:
                 return 2.0 * g.pdf(z) * g.cdf(z)
     elif kind == "os":                     # Z = k-th smallest of n cells of Gamma(L)
         g = stats.gamma(L)
+        n = int(n)
         logc = special.gammaln(n + 1) - special.gammaln(k) - special.gammaln(n - k + 1)
 
         def dens(z):
@@ -157,7 +242,8 @@ def _numeric_pfa(kind: str, a: float, n: int, k: int, L: int) -> float:
 
 
 @lru_cache(maxsize=256)
-def cfar_scale(kind: str, num_train: int, pfa: float, *, rank: int = 0, looks: int = 1) -> float:
+def cfar_scale(kind: str, num_train: float, pfa: float, *, rank: int = 0,
+               looks: float = 1) -> float:
     """The multiplier ``α`` that gives false-alarm probability ``pfa``.
 
     Parameters are as in :func:`false_alarm_rate` (``num_train`` = cells per half for GO/SO).
@@ -168,7 +254,9 @@ def cfar_scale(kind: str, num_train: int, pfa: float, *, rank: int = 0, looks: i
         raise ValueError(f"pfa must lie in (0, 1), got {pfa!r}")
     if num_train < 1:
         raise ValueError("a CFAR window needs at least one training cell")
-    n, L = int(num_train), int(looks)
+    n, L = float(num_train), float(looks)
+    if kind == "os":
+        n = round(n)
     if kind == "ca" and L == 1:
         return float(n * (pfa ** (-1.0 / n) - 1.0))
     if kind == "ca":
@@ -217,8 +305,8 @@ def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tupl
 
 def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
          train: int | tuple[int, ...] = 8, pfa: float = 1e-3, *, rank: float | int = 0.75,
-         looks: int = 1, mode: str | tuple[str, ...] = "wrap", split_axis: int = -1
-         ) -> CFARResult:
+         looks: float = 1, mode: str | tuple[str, ...] = "wrap", split_axis: int = -1,
+         scale: float | None = None) -> CFARResult:
     """Run a CFAR detector on a power map of any dimension.
 
     Parameters
@@ -240,6 +328,9 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
         (``d c b | a b c d``) or ``"reflect"`` (``c b a | a b c d``).
     split_axis
         GO/SO: axis along which the training cells are split into two halves.
+    scale
+        Use this multiplier ``α`` instead of deriving it from ``pfa`` (e.g. one computed
+        with :func:`effective_train_cells` for a map with correlated cells).
 
     Returns
     -------
@@ -259,7 +350,7 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
     n_all, n_half = cfar_window(g, t, split_axis)
     if kind == "ca":
         noise = _ring_sum(x, g, h, modes) / n_all
-        scale = cfar_scale("ca", n_all, pfa, looks=looks)
+        alpha = cfar_scale("ca", n_all, pfa, looks=looks) if scale is None else scale
     elif kind in ("go", "so"):
         if n_half < 1:
             raise ValueError("GO/SO-CFAR needs training cells on both sides of split_axis")
@@ -267,7 +358,7 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
         lead = _ring_sum(x, g, h, modes, -1, ax) / n_half
         lag = _ring_sum(x, g, h, modes, 1, ax) / n_half
         noise = np.maximum(lead, lag) if kind == "go" else np.minimum(lead, lag)
-        scale = cfar_scale(kind, n_half, pfa, looks=looks)
+        alpha = cfar_scale(kind, n_half, pfa, looks=looks) if scale is None else scale
     elif kind == "os":
         k = _os_rank(rank, n_all)
         fp = np.ones([2 * v + 1 for v in h], dtype=bool)
@@ -281,8 +372,8 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
         # footprint with holes (the guard cells) as solid (seen with SciPy 1.17).
         full = rank_filter(padded[None], rank=k - 1, footprint=fp[None], mode="constant")[0]
         noise = full[tuple(slice(v, v + s) for v, s in zip(h, x.shape, strict=True))]
-        scale = cfar_scale("os", n_all, pfa, rank=k, looks=looks)
+        alpha = cfar_scale("os", n_all, pfa, rank=k, looks=looks) if scale is None else scale
     else:
         raise ValueError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
-    threshold = scale * noise
-    return CFARResult(x > threshold, threshold, noise, scale)
+    threshold = alpha * noise
+    return CFARResult(x > threshold, threshold, noise, float(alpha))
