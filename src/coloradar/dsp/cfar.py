@@ -46,8 +46,9 @@ __all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "eff
            "false_alarm_rate", "power_correlation"]
 
 CFAR_KINDS = ("ca", "go", "so", "os")
+# name -> (scipy.ndimage mode, np.pad mode)
 _MODES = {"wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"),
-          "reflect": ("reflect", "symmetric")}   # name -> (scipy.ndimage mode, np.pad mode)
+          "reflect": ("reflect", "symmetric"), "truncate": ("constant", "constant")}
 
 
 @dataclass(frozen=True)
@@ -63,13 +64,13 @@ class CFARResult:
     noise
         float64: the noise statistic ``Z`` per cell.
     scale
-        The multiplier ``α``.
+        The multiplier ``α`` (a per-cell map with ``mode="truncate"``).
     """
 
     detections: np.ndarray
     threshold: np.ndarray
     noise: np.ndarray
-    scale: float
+    scale: float | np.ndarray
 
 
 def _per_axis(v: int | tuple[int, ...], ndim: int, what: str) -> tuple[int, ...]:
@@ -306,7 +307,7 @@ def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tupl
 def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
          train: int | tuple[int, ...] = 8, pfa: float = 1e-3, *, rank: float | int = 0.75,
          looks: float = 1, mode: str | tuple[str, ...] = "wrap", split_axis: int = -1,
-         scale: float | None = None) -> CFARResult:
+         cell_factor: float = 1.0) -> CFARResult:
     """Run a CFAR detector on a power map of any dimension.
 
     Parameters
@@ -325,12 +326,16 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
         Independent exponentials summed per cell (see the module notes).
     mode
         Edge handling per axis: ``"wrap"`` (circular, e.g. Doppler), ``"mirror"``
-        (``d c b | a b c d``) or ``"reflect"`` (``c b a | a b c d``).
+        (``d c b | a b c d``), ``"reflect"`` (``c b a | a b c d``) or ``"truncate"`` (CA/GO/SO
+        only: training cells beyond the edge are left out, the estimate is the mean of those
+        inside and ``α`` is computed for their number, so ``pfa`` holds at the edges too;
+        mirrored cells repeat cells and make the estimate noisier than its count says).
     split_axis
         GO/SO: axis along which the training cells are split into two halves.
-    scale
-        Use this multiplier ``α`` instead of deriving it from ``pfa`` (e.g. one computed
-        with :func:`effective_train_cells` for a map with correlated cells).
+    cell_factor
+        Independent-cell equivalent of one training cell (``N_eff/N`` from
+        :func:`effective_train_cells` for maps with correlated cells); ``α`` is computed for
+        ``cell_factor`` times the training cells used.
 
     Returns
     -------
@@ -348,17 +353,27 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
             raise ValueError(f"axis {ax} has {x.shape[ax]} cells, too few for a window of "
                              f"half-width {h[ax]} with mode {m!r}")
     n_all, n_half = cfar_window(g, t, split_axis)
+    truncate = "truncate" in modes
+    if truncate and kind == "os":
+        raise ValueError("mode 'truncate' is for CA/GO/SO; OS needs a full window "
+                         "('mirror' or 'reflect')")
+    alpha: float | np.ndarray
     if kind == "ca":
-        noise = _ring_sum(x, g, h, modes) / n_all
-        alpha = cfar_scale("ca", n_all, pfa, looks=looks) if scale is None else scale
+        count = _ring_sum(np.ones_like(x), g, h, modes) if truncate else float(n_all)
+        noise = _ring_sum(x, g, h, modes) / count
+        alpha = _alpha_for(kind, count, cell_factor, pfa, 0, looks)
     elif kind in ("go", "so"):
         if n_half < 1:
             raise ValueError("GO/SO-CFAR needs training cells on both sides of split_axis")
         ax = split_axis % nd
-        lead = _ring_sum(x, g, h, modes, -1, ax) / n_half
-        lag = _ring_sum(x, g, h, modes, 1, ax) / n_half
+        ones = np.ones_like(x)
+        c_lead = _ring_sum(ones, g, h, modes, -1, ax) if truncate else float(n_half)
+        c_lag = _ring_sum(ones, g, h, modes, 1, ax) if truncate else float(n_half)
+        lead = _ring_sum(x, g, h, modes, -1, ax) / np.maximum(c_lead, 1.0)
+        lag = _ring_sum(x, g, h, modes, 1, ax) / np.maximum(c_lag, 1.0)
         noise = np.maximum(lead, lag) if kind == "go" else np.minimum(lead, lag)
-        alpha = cfar_scale(kind, n_half, pfa, looks=looks) if scale is None else scale
+        # Unequal halves at an edge: the threshold of the smaller one (conservative for GO).
+        alpha = _alpha_for(kind, np.minimum(c_lead, c_lag), cell_factor, pfa, 0, looks)
     elif kind == "os":
         k = _os_rank(rank, n_all)
         fp = np.ones([2 * v + 1 for v in h], dtype=bool)
@@ -372,8 +387,20 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
         # footprint with holes (the guard cells) as solid (seen with SciPy 1.17).
         full = rank_filter(padded[None], rank=k - 1, footprint=fp[None], mode="constant")[0]
         noise = full[tuple(slice(v, v + s) for v, s in zip(h, x.shape, strict=True))]
-        alpha = cfar_scale("os", n_all, pfa, rank=k, looks=looks) if scale is None else scale
+        alpha = cfar_scale("os", n_all, pfa, rank=k, looks=looks)
     else:
         raise ValueError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
     threshold = alpha * noise
-    return CFARResult(x > threshold, threshold, noise, float(alpha))
+    return CFARResult(x > threshold, threshold, noise, alpha)
+
+
+def _alpha_for(kind: str, count: float | np.ndarray, factor: float, pfa: float, rank: int,
+               looks: float) -> float | np.ndarray:
+    """``α`` for ``count`` training cells (a scalar or a per-cell map of counts)."""
+    if np.isscalar(count):
+        return cfar_scale(kind, float(count) * factor, pfa, rank=rank, looks=looks)
+    counts = np.rint(np.asarray(count)).astype(np.int64)
+    values, inverse = np.unique(counts, return_inverse=True)
+    table = np.array([cfar_scale(kind, max(float(v), 1.0) * factor, pfa, rank=rank, looks=looks)
+                      for v in values])
+    return table[inverse].reshape(counts.shape)

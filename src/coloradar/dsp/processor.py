@@ -32,7 +32,6 @@ from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
 from .cfar import (
     CFAR_KINDS,
     cfar,
-    cfar_scale,
     cfar_window,
     effective_train_cells,
     power_correlation,
@@ -45,7 +44,7 @@ from .windows import WINDOWS, coherent_window, window
 
 __all__ = ["NOISE_WEIGHTINGS", "ProcessingSettings", "RadarProcessor"]
 
-NOISE_WEIGHTINGS = ("whiten", "looks", "off")
+NOISE_WEIGHTINGS = ("whiten", "off")
 """Choices of :attr:`ProcessingSettings.noise_weighting`."""
 
 
@@ -86,9 +85,8 @@ class ProcessingSettings:
         How the channels are summed for detection. ``"whiten"``: each channel weighted by the
         inverse of its noise power, estimated from the frame (median cell power beyond
         ``min_range``), so that noise in the sum is a proper Ntx·Nrx-look chi-square whatever
-        the channel gains and calibration; ``"looks"``: plain sum, threshold for the
-        effective number of looks ``(Σσ²)²/Σσ⁴`` of the estimated noise powers; ``"off"``:
-        plain sum, all channels assumed equally noisy (the chain before issue 10).
+        the channel gains and calibration; ``"off"``: plain sum, all channels assumed
+        equally noisy (the chain before issue 10; false alarms grow with the gain spread).
     doppler_unwrap
         Largest ``|range rate|`` [m/s] searched beyond ±v_max: each detection tests the TDM
         alias hypotheses whose range rate stays within it (at most Ntx of them) and keeps the
@@ -295,27 +293,27 @@ class RadarProcessor:
         h = [g + t for g, t in zip(s.cfar_guard, s.cfar_train, strict=True)]
         corr = (power_correlation(window(s.doppler_window, nc), nd, 2 * h[0]),
                 power_correlation(window(s.range_window, ns), self.range_fft_size, 2 * h[1]))
-        n_all, _ = cfar_window(s.cfar_guard, s.cfar_train, split_axis=1)
+        n_all, n_half = cfar_window(s.cfar_guard, s.cfar_train, split_axis=1)
+        n_half = max(n_half, 1)
         e_all, e_half = effective_train_cells(s.cfar_guard, s.cfar_train, corr, split_axis=1,
                                               wrap=(nd, None))
-        self._cfar_cells = {"ca": e_all, "go": e_half, "so": e_half, "os": float(n_all)}
-        self._cfar_rank = round(s.cfar_rank * n_all) if s.cfar_kind == "os" else 0
-        self._cfar_alpha(self._looks)                                   # cached for detect()
+        self._cell_factor = {"ca": e_all / n_all, "go": e_half / n_half,
+                             "so": e_half / n_half, "os": 1.0}[s.cfar_kind]
         # Doppler disambiguation (coloradar.dsp.tdm).
         limit = s.doppler_unwrap if (s.tdm_compensation and ntx > 1) else 0.0
         vmax = 0.5 * nd * (self.velocities[1] - self.velocities[0])
         self._aliases = alias_hypotheses(ntx, vmax, limit)
         pairs = overlap_pairs(self.calib.antenna.virtual)
         self._pairs = pairs if pairs.resolves(self._aliases) else None
+        # Range bins notched by DC removal: the window's half-width in bins, zero padding
+        # included (periodic Hann: 3 taps, Blackman: 5).
+        taps = {"none": 0, "hann": 1, "blackman": 2}[s.range_window]
+        self._notch_bins = (int(np.ceil((taps + 1) * self.range_fft_size / ns))
+                            if s.dc_removal else 0)
         # Sidelobe envelopes (Doppler wraps: lags up to nd//2).
         self._env_d = sidelobe_envelope(window(s.doppler_window, nc), nd, nd // 2 + 1)
         self._env_r = sidelobe_envelope(window(s.range_window, ns), self.range_fft_size,
                                         self.num_range_bins)
-
-    def _cfar_alpha(self, looks: float) -> float:
-        s = self.settings
-        return cfar_scale(s.cfar_kind, self._cfar_cells[s.cfar_kind], s.pfa,
-                          rank=self._cfar_rank, looks=looks)
 
     # ------------------------------------------------------------------ cubes
     def _check(self, adc: np.ndarray) -> np.ndarray:
@@ -409,40 +407,46 @@ class RadarProcessor:
         rcube = self._range_cube(adc)
         return self._detect(rcube, self._doppler(rcube))
 
-    def _detection_map(self, rd: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        """Detection statistic ``(doppler, range)`` float64, the plain power sum, and the CFAR
-        multiplier for it (``noise_weighting``)."""
+    def _detection_map(self, rd: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), and
+        the looks the CFAR threshold is computed for (``noise_weighting``)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
         mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
         np.square(mag2, out=mag2)
         plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
-            return plain.reshape(nd, nr).astype(np.float64), plain, self._cfar_alpha(self._looks)
+            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks
+        # Inverse-noise weights: each term a unit exponential times the mean noise power, so
+        # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
                              int(np.ceil(s.min_range / self.range_bin_width)))
-        if s.noise_weighting == "whiten":
-            wts = (sig2.mean() / sig2).astype(np.float32)
-            stat = (wts @ mag2).reshape(nd, nr).astype(np.float64)
-            return stat, plain, self._cfar_alpha(self._looks)
-        # "looks": Satterthwaite's effective looks of a sum of unequal exponentials, rounded
-        # down (conservative) to keep the threshold cache small.
-        looks = max(1, int(sig2.sum() ** 2 / np.square(sig2).sum()))
-        return plain.reshape(nd, nr).astype(np.float64), plain, self._cfar_alpha(looks)
+        wts = (sig2.mean() / sig2).astype(np.float32)
+        return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks
 
     def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
         s = self.settings
-        stat, plain, alpha = self._detection_map(rd)
+        stat, plain, looks = self._detection_map(rd)
         modes = ("wrap", "mirror")
-        res = cfar(stat, s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa, rank=s.cfar_rank,
-                   mode=modes, split_axis=1, scale=alpha)
-        mask = res.detections
+        # Range edges: training cells beyond the map are left out ("truncate"), not mirrored
+        # (mirrored copies made the edge cells fire ~5x too often). OS needs a full window.
+        cmodes = ("wrap", "mirror" if s.cfar_kind == "os" else "truncate")
+        # DC removal notches the first range bins (the window spreads the notch): they would
+        # lower the noise estimate of their neighbours, so the CFAR map starts after them.
+        r0 = min(self._notch_bins, stat.shape[1] - 2 * sum(s.cfar_train) - 1)
+        res = cfar(stat[:, r0:], s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
+                   rank=s.cfar_rank, looks=looks, mode=cmodes, split_axis=1,
+                   cell_factor=self._cell_factor)
+        mask = np.zeros(stat.shape, dtype=bool)
+        mask[:, r0:] = res.detections
+        noise = np.full(stat.shape, np.inf)
+        noise[:, r0:] = res.noise
         if s.peak_grouping:
             mask &= local_maxima(stat, modes)
         d, r = np.nonzero(mask)
         if s.sidelobe_guard and d.size > 1:
             # Candidates inside min_range still explain sidelobes, so the cut comes after.
-            keep = sidelobe_mask(d, r, stat[d, r], stat[d, r] - res.noise[d, r], self._env_d,
+            keep = sidelobe_mask(d, r, stat[d, r], stat[d, r] - noise[d, r], self._env_d,
                                  self._env_r, stat.shape[0], 10.0 ** (s.sidelobe_margin_db / 10))
             d, r = d[keep], r[keep]
         near = r < int(np.ceil(s.min_range / self.range_bin_width))
@@ -487,7 +491,7 @@ class RadarProcessor:
             range_rate=k_true * (self.velocities[1] - self.velocities[0]),
             azimuth=np.arctan2(unit[:, 1], unit[:, 0]), elevation=np.arcsin(unit[:, 2]),
             xyz=xyz, intensity=peak, power=flat[d, r].astype(np.float64),
-            snr=stat[d, r] / res.noise[d, r], alias=alias)
+            snr=stat[d, r] / noise[d, r], alias=alias)
 
     def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
