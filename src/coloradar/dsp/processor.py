@@ -81,6 +81,10 @@ class ProcessingSettings:
         ``pfa`` the false-alarm probability per cell for noise (the map sums Ntx·Nrx channels,
         and the threshold accounts for it and for the windows' correlation of neighbouring
         cells); ``cfar_rank`` the OS rank fraction.
+    cfar_excision
+        CA/GO/SO: a second CFAR pass with the first pass's detections replaced by their noise
+        estimate, so that a strong target does not mask weaker ones within its training
+        window (:func:`coloradar.dsp.cfar.cfar`).
     noise_weighting
         How the channels are summed for detection. ``"whiten"``: each channel weighted by the
         inverse of its noise power, estimated from the frame (median cell power beyond
@@ -135,6 +139,7 @@ class ProcessingSettings:
     cfar_train: tuple[int, int] = (2, 8)
     pfa: float = 1e-4
     cfar_rank: float = 0.75
+    cfar_excision: bool = True
     noise_weighting: str = "whiten"
     doppler_unwrap: float = 5.0
     heatmap_unwrap: bool = False
@@ -436,7 +441,7 @@ class RadarProcessor:
         r0 = min(self._notch_bins, stat.shape[1] - 2 * sum(s.cfar_train) - 1)
         res = cfar(stat[:, r0:], s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
                    rank=s.cfar_rank, looks=looks, mode=cmodes, split_axis=1,
-                   cell_factor=self._cell_factor)
+                   cell_factor=self._cell_factor, excise=s.cfar_excision)
         mask = np.zeros(stat.shape, dtype=bool)
         mask[:, r0:] = res.detections
         noise = np.full(stat.shape, np.inf)
