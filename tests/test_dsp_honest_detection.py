@@ -253,3 +253,32 @@ def test_a_target_30_db_below_a_strong_one_is_still_found(name):
             <= 1.5 * w.velocity_bin_width
         found += bool(ok)
     assert found >= 0.9 * trials, found
+
+
+# --------------------------------------------------------------------------- heatmaps
+@pytest.mark.parametrize(("name", "factor"), [("cascade", 1.8), ("single_chip", 1.5)])
+def test_disambiguated_heatmap(name, factor):
+    """Plain heatmaps carry the folded rate of the peak Doppler bin (within ±v_max) and the
+    angle of the folded compensation; ``heatmap_unwrap`` gives the target's angle and rate."""
+    calib = radar(name)
+    w = calib.waveform
+    g = np.random.default_rng(21)
+    for i in range(2):
+        az = np.radians(g.uniform(-40, 40))
+        u = np.array([np.cos(az), np.sin(az), 0.0])
+        v = factor * w.max_velocity * g.choice([-1.0, 1.0])
+        adc = synthesize_adc(calib, [4.0 * u], [v * u], amplitude_for(calib, 25.0, 1.0) * 16,
+                             noise_std=1.0, rng=i, precision="single")
+        if calib.phase_frequency is not None:
+            adc = apply_channel_errors(adc, calib.phase_frequency)
+        for unwrap in (False, True):
+            proc = RadarProcessor(calib, coupling_subtraction=False, heatmap_unwrap=unwrap)
+            hm = proc.heatmap(adc)
+            e, a, r = np.unravel_index(np.argmax(hm[..., 0]), hm.shape[:3])
+            uy = proc.grid.az_sines[a]
+            az_err = abs(uy - u[1]) / (2.0 / (proc.grid.num_az * proc.grid.rho))
+            rr_err = abs(hm[e, a, r, 1] - v) / w.velocity_bin_width
+            if unwrap:
+                assert az_err <= 1.0 and rr_err <= 1.5, (az_err, rr_err)
+            else:
+                assert abs(hm[e, a, r, 1]) <= w.max_velocity and rr_err > 1.5

@@ -383,12 +383,48 @@ class RadarProcessor:
             over Doppler of the angle spectrum's power (a target of amplitude ``a`` per channel
             gives ``|a|²``), channel 1 the range rate of that peak [m/s].
         """
-        return self._heatmap(self.range_doppler(adc))
+        rd = self.range_doppler(adc)
+        return self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap else self._heatmap(rd)
 
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
                                      workers=self.settings.workers)
+
+    def _heatmap_unwrapped(self, rd: np.ndarray) -> np.ndarray:
+        """Heatmap with disambiguated Doppler (``heatmap_unwrap``), through the same kernel.
+
+        Cells of the range–Doppler map that pass the CFAR get their best alias hypothesis
+        (as detections do, at the bin centre); their channels are compensated for it before
+        the kernel forms the peak-over-Doppler heatmap, and channel 1 of every output cell
+        whose peak came from such a cell carries ``folded rate + 2m·v_max``. Cells below
+        the CFAR keep the folded compensation and rate (noise has no Doppler to unwrap).
+        """
+        hyps = self._aliases
+        if hyps.size < 2:
+            return self._heatmap(rd)
+        stat, _, looks = self._detection_map(rd)
+        mask, _ = self._cfar_mask(stat, looks)
+        d, r = np.nonzero(mask)
+        if d.size == 0:
+            return self._heatmap(rd)
+        nd = rd.shape[2]
+        alias, _ = self._choose_alias(rd[:, :, d, r], (d - nd // 2).astype(np.float64))
+        assert alias is not None
+        moved = alias != 0
+        d, r, alias = d[moved], r[moved], alias[moved]
+        if d.size == 0:
+            return self._heatmap(rd)
+        rd = rd.copy()
+        rd[:, :, d, r] *= alias_phase(rd.shape[0], alias)[:, None, :]
+        out = self._heatmap(rd)
+        m_map = np.zeros(stat.shape, dtype=np.int64)
+        m_map[d, r] = alias
+        dv = self.velocities[1] - self.velocities[0]
+        di = np.clip(np.rint(out[..., 1] / dv).astype(np.int64) + nd // 2, 0, nd - 1)
+        ri = np.arange(out.shape[2])[None, None, :]
+        out[..., 1] += (m_map[di, ri] * (nd * dv)).astype(np.float32)
+        return out
 
     def heatmap_config(self) -> HeatmapConfig:
         """The grid of :meth:`heatmap` with the true angles of its bins (for heatmap_cfg.txt).
@@ -429,16 +465,16 @@ class RadarProcessor:
         wts = (sig2.mean() / sig2).astype(np.float32)
         return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks
 
-    def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
+    def _cfar_mask(self, stat: np.ndarray, looks: int) -> tuple[np.ndarray, np.ndarray]:
+        """CFAR on the detection statistic: bool mask and noise estimate, ``(doppler, range)``
+        (cells the CFAR does not test: False and +inf)."""
         s = self.settings
-        stat, plain, looks = self._detection_map(rd)
-        modes = ("wrap", "mirror")
         # Range edges: training cells beyond the map are left out ("truncate"), not mirrored
         # (mirrored copies made the edge cells fire ~5x too often). OS needs a full window.
         cmodes = ("wrap", "mirror" if s.cfar_kind == "os" else "truncate")
         # DC removal notches the first range bins (the window spreads the notch): they would
         # lower the noise estimate of their neighbours, so the CFAR map starts after them.
-        r0 = min(self._notch_bins, stat.shape[1] - 2 * sum(s.cfar_train) - 1)
+        r0 = max(0, min(self._notch_bins, stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
         res = cfar(stat[:, r0:], s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
                    rank=s.cfar_rank, looks=looks, mode=cmodes, split_axis=1,
                    cell_factor=self._cell_factor, excise=s.cfar_excision)
@@ -446,6 +482,13 @@ class RadarProcessor:
         mask[:, r0:] = res.detections
         noise = np.full(stat.shape, np.inf)
         noise[:, r0:] = res.noise
+        return mask, noise
+
+    def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
+        s = self.settings
+        stat, plain, looks = self._detection_map(rd)
+        modes = ("wrap", "mirror")
+        mask, noise = self._cfar_mask(stat, looks)
         if s.peak_grouping:
             mask &= local_maxima(stat, modes)
         d, r = np.nonzero(mask)
@@ -566,7 +609,10 @@ class RadarProcessor:
         rcube = self._range_cube(adc)
         rd = self._doppler(rcube)
         pts = self._detect(rcube, rd).pointcloud() if pointcloud else None
-        return (self._heatmap(rd) if heatmap else None), pts
+        if not heatmap:
+            return None, pts
+        return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
+                else self._heatmap(rd)), pts
 
     def __repr__(self) -> str:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
