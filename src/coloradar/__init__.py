@@ -7,6 +7,7 @@ Quick start::
     adc = seq.cascade.adc[0]                       # complex64 (tx, rx, chirp, sample)
 """
 
+from ._version import __version__
 from .calib import Calibration, RadarCalib, load_calibration
 from .dataset import Dataset, Sequence, open_dataset, open_sequence
 from .errors import (
@@ -19,8 +20,6 @@ from .errors import (
     MissingDataError,
     OutputExistsError,
 )
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Calibration",

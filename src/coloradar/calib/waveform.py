@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 from ..errors import CalibrationError, CalibrationWarning
 from ._parse import get_number, key_values
@@ -128,7 +129,7 @@ _KEYS = {
 }
 
 
-def _fix_units(values: dict[str, float], name: str) -> dict[str, float]:
+def _fix_units(values: dict[str, Any], name: str) -> dict[str, Any]:
     """Correct the unit defects of the real cascade file, with a warning for each change.
 
     Chirp times of TI radars are microseconds to a few hundred microseconds. A value above 10 ms

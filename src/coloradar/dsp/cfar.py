@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from math import comb
+from typing import Literal
 
 import numpy as np
 from scipy import integrate, optimize, special, stats
@@ -47,8 +48,9 @@ __all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "eff
 
 CFAR_KINDS = ("ca", "go", "so", "os")
 # name -> (scipy.ndimage mode, np.pad mode)
-_MODES = {"wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"),
-          "reflect": ("reflect", "symmetric"), "truncate": ("constant", "constant")}
+_MODES: dict[str, tuple[str, Literal["wrap", "reflect", "symmetric", "constant"]]] = {
+    "wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"), "reflect": ("reflect", "symmetric"),
+    "truncate": ("constant", "constant")}
 
 
 @dataclass(frozen=True)
@@ -74,7 +76,7 @@ class CFARResult:
 
 
 def _per_axis(v: int | tuple[int, ...], ndim: int, what: str) -> tuple[int, ...]:
-    t = (int(v),) * ndim if np.isscalar(v) else tuple(int(x) for x in v)
+    t = tuple(int(x) for x in v) if isinstance(v, tuple | list | np.ndarray) else (int(v),) * ndim
     if len(t) != ndim or min(t) < 0:
         raise ValueError(f"{what} must be a non-negative int or one per axis ({ndim}), got {v!r}")
     return t
@@ -152,8 +154,9 @@ def effective_train_cells(guard: tuple[int, ...], train: tuple[int, ...],
         c = np.ones((len(o), len(o)))
         for a in range(nd):
             lag = np.abs(o[:, None, a] - o[None, :, a])
-            if wraps[a]:
-                lag = np.minimum(lag, int(wraps[a]) - lag)     # type: ignore[operator]
+            period = wraps[a]
+            if period:
+                lag = np.minimum(lag, int(period) - lag)
             r = np.asarray(correlation[a], dtype=np.float64)
             c *= np.where(lag < r.size, r[np.minimum(lag, r.size - 1)], 0.0)
         return float(len(o) ** 2 / c.sum()) if len(o) else 0.0
@@ -414,9 +417,9 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
 def _alpha_for(kind: str, count: float | np.ndarray, factor: float, pfa: float, rank: int,
                looks: float) -> float | np.ndarray:
     """``α`` for ``count`` training cells (a scalar or a per-cell map of counts)."""
-    if np.isscalar(count):
+    if not isinstance(count, np.ndarray):
         return cfar_scale(kind, float(count) * factor, pfa, rank=rank, looks=looks)
-    counts = np.rint(np.asarray(count)).astype(np.int64)
+    counts = np.rint(count).astype(np.int64)
     values, inverse = np.unique(counts, return_inverse=True)
     table = np.array([cfar_scale(kind, max(float(v), 1.0) * factor, pfa, rank=rank, looks=looks)
                       for v in values])

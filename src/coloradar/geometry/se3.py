@@ -9,7 +9,7 @@ Composition chains the inner names: ``world_T_sensor = world_T_base @ base_T_sen
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -128,6 +128,10 @@ class SE3:
         inv = self.rotation.inv()
         return SE3(inv, -rotate(inv, self.translation))
 
+    @overload
+    def __matmul__(self, other: SE3) -> SE3: ...
+    @overload
+    def __matmul__(self, other: Trajectory) -> Trajectory: ...
     def __matmul__(self, other: SE3 | Trajectory) -> SE3 | Trajectory:
         """``a_T_c = a_T_b @ b_T_c``; with a :class:`Trajectory` on the right, every pose."""
         if isinstance(other, SE3):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
+from typing import overload
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -115,7 +116,11 @@ class Trajectory:
     def __len__(self) -> int:
         return int(self.timestamps.size)
 
-    def __getitem__(self, key: int | slice | np.ndarray) -> SE3 | Trajectory:
+    @overload
+    def __getitem__(self, key: int | np.integer) -> SE3: ...
+    @overload
+    def __getitem__(self, key: slice | np.ndarray) -> Trajectory: ...
+    def __getitem__(self, key: int | np.integer | slice | np.ndarray) -> SE3 | Trajectory:
         """An int gives the :class:`SE3` pose at that knot; a slice or index array a Trajectory."""
         if isinstance(key, (int, np.integer)):
             return SE3(self.rotations[int(key)], self.translations[int(key)])

@@ -235,6 +235,7 @@ def radar_inertial_odometry(track: EgoVelocityTrack, calib: Calibration, *,
         att = _attitude_from_gyro(sub.timestamps, imu_t, np.asarray(imu_rates, float),
                                   base_R_imu, initial_pose.rotation, gyro_bias)
     else:
+        assert groundtruth is not None  # checked above for this orientation
         att = groundtruth.interpolate_arrays(sub.timestamps)[1]
     return dead_reckon(sub, att, base_T_radar, initial_position=initial_pose.translation,
                        name=f"{radar} radar + {orientation} odometry")

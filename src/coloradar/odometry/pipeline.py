@@ -111,7 +111,7 @@ def _frames(timestamps: np.ndarray, start: float | None, duration: float | None,
         raise ColoradarError(f"stride must be >= 1, got {stride}")
     t0 = timestamps[0] if timestamps.size else 0.0
     lo = None if start is None else t0 + start
-    hi = None if duration is None else (t0 if start is None else lo) + duration
+    hi = None if duration is None else (t0 if lo is None else lo) + duration
     idx = window_indices(timestamps, lo, hi)[::stride]
     return idx if max_frames is None else idx[:max_frames]
 

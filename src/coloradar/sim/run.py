@@ -28,6 +28,7 @@ one ``calib`` folder, as the real dataset's runs do.
 from __future__ import annotations
 
 import datetime
+import functools
 import json
 import os
 import shutil
@@ -164,7 +165,7 @@ def run_name(scene: str, seed: int, start_time: float = DEFAULT_START_TIME) -> s
 def heatmap_processor(radar_calib: RadarCalib):
     """A ``coloradar.dsp.RadarProcessor`` for the radar, or None when dsp is not available."""
     try:
-        from ..dsp import RadarProcessor  # type: ignore[attr-defined]
+        from ..dsp import RadarProcessor
     except ImportError:
         return None
     proc = RadarProcessor(radar_calib)
@@ -361,7 +362,7 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
                           format_heatmap_cfg(calib.heatmap))
     if radar == "single_chip":
         write_timestamps(ctx.root / radar / "pointclouds" / "timestamps.txt", stamps)
-    out = {f"{radar}/timestamps": stamps, f"{radar}/world_T_radar": world_T,
+    out: dict[str, np.ndarray] = {f"{radar}/timestamps": stamps, f"{radar}/world_T_radar": world_T,
            f"{radar}/velocity": vel, f"{radar}/angular_velocity": ang,
            f"{radar}/offsets": np.asarray(offsets, dtype=np.int64)}
     for k, parts in acc.items():
@@ -509,7 +510,7 @@ def simulate_run(
         tasks.append(lambda: _lidar_task(ctx, times["lidar"]))
     for r in RADARS:
         if r in sensors:
-            tasks.append(lambda r=r: _radar_task(ctx, r, times[r]))
+            tasks.append(functools.partial(_radar_task, ctx, r, times[r]))
     truth: dict[str, np.ndarray] = {}
     try:
         if workers > 1 and len(tasks) > 1:

@@ -159,7 +159,7 @@ class Box:
         for i, (n, off, u, v, size) in enumerate(spec):
             if i == 5 and c[2] - hz <= 0.01:
                 continue  # resting on the floor: its bottom is never seen
-            faces.append(Rect(c + n * off, u, v, size, self.reflectivity,
+            faces.append(Rect(c + n * off, u, v, np.array(size), self.reflectivity,
                               self.lidar_reflectivity, True, f"{self.name}:face{i}"))
         return faces
 
@@ -303,7 +303,7 @@ class MovingObject:
             rcs = p[:, 6] * self.rcs / p[:, 6].sum()
             return {"pos": p[:, :3] * [1, 1, scale], "normal": normal, "swing": p[:, 4],
                     "swing_phase": p[:, 5], "strength": np.sqrt(rcs)}
-        box = Box([0, 0, self.size[2] / 2], self.size, 0.0, self.reflectivity,
+        box = Box(np.array([0, 0, self.size[2] / 2]), self.size, 0.0, self.reflectivity,
                   self.lidar_reflectivity, self.rcs, self.name)
         s = _sample_rects(box.faces(), 0.3, np.random.default_rng(0))
         e = _sample_edges([box], 0.3)
@@ -347,7 +347,7 @@ class MovingObject:
         """The object's box faces at times ``t``: geometry ``(T, 5, ...)``."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         ps = self.path.sample(t)
-        faces = Box([0, 0, self.size[2] / 2], self.size, 0.0).faces()
+        faces = Box(np.array([0, 0, self.size[2] / 2]), self.size, 0.0).faces()
         rot = Rotation.from_euler("z", ps.heading[:, None]).as_matrix()                  # (T, 3, 3)
 
         def world(vecs, offset=None):
@@ -548,16 +548,20 @@ def _room_rects(d: dict, where: str) -> list[Rect]:
     ex, ey, ez = np.eye(3)
     out = []
     if d.get("floor", True):
-        out.append(Rect([c[0], c[1], lo[2]], ex, ey, [s[0], s[1]], rho_floor, lid,
+        out.append(Rect(np.array([c[0], c[1], lo[2]]), ex, ey, np.array([s[0], s[1]]), rho_floor, lid,
                         name=f"{name}:floor"))
     if d.get("ceiling", True):
-        out.append(Rect([c[0], c[1], hi[2]], ex, ey, [s[0], s[1]], rho, lid,
+        out.append(Rect(np.array([c[0], c[1], hi[2]]), ex, ey, np.array([s[0], s[1]]), rho, lid,
                         name=f"{name}:ceiling"))
     if d.get("walls", True):
-        out += [Rect([lo[0], c[1], c[2]], ey, ez, [s[1], s[2]], rho, lid, name=f"{name}:wall-x"),
-                Rect([hi[0], c[1], c[2]], ey, ez, [s[1], s[2]], rho, lid, name=f"{name}:wall+x"),
-                Rect([c[0], lo[1], c[2]], ex, ez, [s[0], s[2]], rho, lid, name=f"{name}:wall-y"),
-                Rect([c[0], hi[1], c[2]], ex, ez, [s[0], s[2]], rho, lid, name=f"{name}:wall+y")]
+        out += [Rect(np.array([lo[0], c[1], c[2]]), ey, ez, np.array([s[1], s[2]]), rho, lid,
+                     name=f"{name}:wall-x"),
+                Rect(np.array([hi[0], c[1], c[2]]), ey, ez, np.array([s[1], s[2]]), rho, lid,
+                     name=f"{name}:wall+x"),
+                Rect(np.array([c[0], lo[1], c[2]]), ex, ez, np.array([s[0], s[2]]), rho, lid,
+                     name=f"{name}:wall-y"),
+                Rect(np.array([c[0], hi[1], c[2]]), ex, ez, np.array([s[0], s[2]]), rho, lid,
+                     name=f"{name}:wall+y")]
     return out
 
 

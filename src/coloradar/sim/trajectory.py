@@ -11,12 +11,13 @@ truth file are exact at every timestamp.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .paths import Path, Sinusoids
+from .paths import EllipsePath, LinePath, Path, Sinusoids
 
 __all__ = ["MOTION_PROFILES", "RigState", "RigTrajectory", "make_trajectory"]
 
@@ -170,7 +171,7 @@ def _random_sinusoids(rng: np.random.Generator, amplitude: float, band: tuple[fl
 
 
 def make_trajectory(path: Path, profile: str = "smooth",
-                    seed: int | np.random.Generator | None = 0,
+                    seed: int | Sequence[int] | np.random.Generator | None = 0,
                     speed: float | None = None) -> RigTrajectory:
     """A rig trajectory along ``path`` with the perturbations of a motion profile.
 
@@ -195,10 +196,10 @@ def make_trajectory(path: Path, profile: str = "smooth",
     if speed is not None:
         if not (np.isfinite(speed) and speed >= 0):
             raise ValueError(f"speed must be a finite non-negative number [m/s], got {speed!r}")
-        if not hasattr(path, "speed"):
+        if not isinstance(path, EllipsePath | LinePath):
             raise ValueError(f"{type(path).__name__} has no speed to set")
-        path = replace(path, speed=float(speed))  # type: ignore[type-var]
-    elif spec["speed_factor"] != 1.0 and hasattr(path, "speed"):
+        path = replace(path, speed=float(speed))
+    elif spec["speed_factor"] != 1.0 and isinstance(path, EllipsePath | LinePath):
         path = replace(path, speed=path.speed * spec["speed_factor"])
     amps, band = spec["offset"]
     offset = tuple(_random_sinusoids(rng, a, band) for a in amps)

@@ -49,7 +49,9 @@ def ffmpeg_path() -> str | None:
 
 def _writer(suffix: str, fps: float) -> animation.AbstractMovieWriter:
     if suffix == ".gif":
-        return animation.PillowWriter(fps=fps)
+        # matplotlib's stubs say int; both writers take a fractional rate (Pillow: a frame lasts
+        # 1000/fps ms; ffmpeg: -r fps).
+        return animation.PillowWriter(fps=fps)  # type: ignore[arg-type]
     if suffix == ".mp4":
         exe = ffmpeg_path()
         if exe is None:
@@ -57,7 +59,7 @@ def _writer(suffix: str, fps: float) -> animation.AbstractMovieWriter:
                                  "(or 'coloradar[viz]'), or write a .gif")
         matplotlib.rcParams["animation.ffmpeg_path"] = exe
         # yuv420p: the pixel format every player decodes; even sizes are ensured by the figure.
-        return animation.FFMpegWriter(fps=fps, codec="libx264",
+        return animation.FFMpegWriter(fps=fps, codec="libx264",  # type: ignore[arg-type]
                                       extra_args=["-pix_fmt", "yuv420p"])
     raise ColoradarError(f"unsupported animation format {suffix!r}: use .mp4 or .gif")
 

@@ -44,7 +44,9 @@ def _levels(img: np.ndarray, dynamic_range: float | None) -> tuple[float, float]
 def _target_axes(fig: Figure | None, ax: Axes | None, size: tuple[float, float]) -> tuple[
         Figure, Axes]:
     if ax is not None:
-        return ax.figure, ax
+        # An axes inside a SubFigure: callers get (and save) the whole figure.
+        f = ax.figure
+        return (f if isinstance(f, Figure) else f.figure), ax
     fig = fig or new_figure(*size)
     return fig, (fig.axes[0] if fig.axes else fig.add_subplot())
 

@@ -11,6 +11,7 @@ extrinsic is used.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -22,6 +23,9 @@ from ..calib import Calibration, HeatmapConfig
 from ..errors import MissingDataError
 from ..geometry import SE3, Trajectory, sensor_to_base, trajectory_from_groundtruth
 from ._figure import new_figure
+
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d import Axes3D
 
 __all__ = ["RADAR_STREAMS", "Scene", "draw_scene", "gather_scene", "heatmap_points",
            "plot_scene", "radar_points", "radar_source", "scene_time"]
@@ -190,7 +194,7 @@ class _Framer:
         self.calib, self.frame, self.traj, self.t = calib, frame, traj, t
         self.frame_T_base = (SE3.identity() if frame in ("base", "world")
                              else sensor_to_base(calib, frame).inverse())
-        self.frame_T_world = None
+        self.frame_T_world: SE3 | None = None
         if traj is not None and traj.covers(np.array([t]))[0]:
             w_T_b = traj.at(t)
             self.frame_T_world = (SE3.identity() if frame == "world"
@@ -200,7 +204,9 @@ class _Framer:
 
     def pose(self, sensor: str, t_data: float) -> SE3:
         b_T_s = sensor_to_base(self.calib, sensor)
-        if self.frame_T_world is not None and self.traj.covers(np.array([t_data]))[0]:
+        if self.frame_T_world is None or self.traj is None:
+            return self.frame_T_base @ b_T_s
+        if self.traj.covers(np.array([t_data]))[0]:
             return self.frame_T_world @ self.traj.at(t_data) @ b_T_s
         if self.frame == "world":
             return self.frame_T_world @ self.traj.at(self.t) @ b_T_s
@@ -316,13 +322,14 @@ def _clip_3d(scene: Scene, centre: np.ndarray, extent: float) -> Scene:
     """A copy of ``scene`` without points outside the 3-D view box (mplot3d draws them)."""
     half = np.array([extent, extent, extent / 4])
 
-    def inside(p: np.ndarray | None) -> np.ndarray | None:
-        if p is None:
-            return None
+    def inside(p: np.ndarray) -> np.ndarray:
         return p[np.all(np.abs(p[:, :3] - centre) <= half, axis=1)]
 
-    return Scene(scene.frame, scene.time, inside(scene.lidar),
-                 {k: inside(v) for k, v in scene.radars.items()}, inside(scene.trajectory),
+    def maybe(p: np.ndarray | None) -> np.ndarray | None:
+        return None if p is None else inside(p)
+
+    return Scene(scene.frame, scene.time, maybe(scene.lidar),
+                 {k: inside(v) for k, v in scene.radars.items()}, maybe(scene.trajectory),
                  scene.rig, scene.sources)
 
 
@@ -354,17 +361,21 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
         raise ValueError(f"view must be 'bev' or '3d', got {view!r}")
     if scene.lidar is not None and len(scene.lidar):
         if view == "bev":
-            ax.scatter(*uv(scene.lidar), s=0.4, c="0.55", linewidths=0, label="lidar",
+            u, v = uv(scene.lidar)
+            ax.scatter(u, v, s=0.4, c="0.55", linewidths=0, label="lidar",
                        rasterized=True)
         else:
-            ax.scatter(*scene.lidar.T, s=0.3, c="0.55", linewidths=0, label="lidar")
+            x, y, z = scene.lidar[:, :3].T
+            cast("Axes3D", ax).scatter(x, y, z, s=0.3, c="0.55", linewidths=0, label="lidar")
     for radar, pts in scene.radars.items():
         if not len(pts):
             continue
-        kw = dict(c=pts[:, 3], cmap="coolwarm", norm=norm, s=14, marker=_MARKERS.get(radar, "o"),
-                  edgecolors="k", linewidths=0.3, label=f"{radar} radar")
+        kw: dict[str, Any] = dict(c=pts[:, 3], cmap="coolwarm", norm=norm, s=14,
+                                  marker=_MARKERS.get(radar, "o"), edgecolors="k",
+                                  linewidths=0.3, label=f"{radar} radar")
         if view == "bev":
-            ax.scatter(*uv(pts), **kw)
+            u, v = uv(pts)
+            ax.scatter(u, v, **kw)
         else:
             ax.scatter(*pts[:, :3].T, **kw)
     if scene.trajectory is not None and len(scene.trajectory):
@@ -389,13 +400,14 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
             ax.set_ylim(cv - extent, cv + extent)
         ax.grid(True, lw=0.3, alpha=0.5)
     else:
-        ax.set_zlabel("z [m]")
+        ax3d = cast("Axes3D", ax)  # view="3d" draws into a 3-D axes (see the docstring)
+        ax3d.set_zlabel("z [m]")
         if extent is not None and scene.rig is not None:
             c = scene.rig[0]
-            ax.set_xlim(c[0] - extent, c[0] + extent)
-            ax.set_ylim(c[1] - extent, c[1] + extent)
-            ax.set_zlim(c[2] - extent / 4, c[2] + extent / 4)
-            ax.set_box_aspect((4, 4, 1))
+            ax3d.set_xlim(c[0] - extent, c[0] + extent)
+            ax3d.set_ylim(c[1] - extent, c[1] + extent)
+            ax3d.set_zlim(c[2] - extent / 4, c[2] + extent / 4)
+            ax3d.set_box_aspect((4, 4, 1))
     ax.set_xlabel(li)
     ax.set_ylabel(lj)
     ax.legend(loc="upper right", fontsize="small", markerscale=2)
