@@ -381,7 +381,11 @@ class RadarProcessor:
         numpy.ndarray
             float32 ``(el, az, range, 2)`` on :meth:`heatmap_config`'s grid: channel 0 the peak
             over Doppler of the angle spectrum's power (a target of amplitude ``a`` per channel
-            gives ``|a|²``), channel 1 the range rate of that peak [m/s].
+            gives ``|a|²``), channel 1 the range rate of that peak [m/s]: the centre of the
+            peak's Doppler bin, *folded* into ``[−v_max, v_max)``, with the angle spectrum
+            TDM-compensated for that folded bin. With ``heatmap_unwrap`` the cells that pass
+            the CFAR are compensated for their best Doppler alias and channel 1 carries the
+            unwrapped rate (:meth:`_heatmap_unwrapped`).
         """
         rd = self.range_doppler(adc)
         return self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap else self._heatmap(rd)
