@@ -110,12 +110,13 @@ def channel_noise(power: np.ndarray, first_range: int = 0) -> np.ndarray:
 
 def sidelobe_envelope(window: np.ndarray, fft_size: int, num_lags: int,
                       oversample: int = 32) -> np.ndarray:
-    """Worst-case power leakage of a windowed tone into bins ``Δ = 0 … num_lags − 1`` away.
+    """Worst-case power leakage of a windowed tone into bins ``Δ = 0 … num_lags − 1`` away
+    from its peak cell, relative to that cell.
 
-    A tone between bins lies within half a bin of its peak cell, so a cell ``Δ`` bins from
-    the peak sees the window's response at some ``|δ| ≥ Δ − ½``: the envelope is
-    ``E(Δ) = max_{|δ| ≥ Δ−½} |W(δ)|²/|W(0)|²`` (``E(0) = 1``), ``W`` the window's DTFT in
-    units of FFT bins (zero padding included).
+    A tone lies within half a bin of its peak cell (offset ``δ``, ``|δ| ≤ ½``); the cell ``Δ``
+    bins away holds ``|W(Δ − δ)|²`` against the peak cell's ``|W(δ)|²`` (scalloping loss
+    included), so ``E(Δ) = max_{|δ|≤½} |W(Δ−δ)|² / |W(δ)|²``, ``W`` the window's DTFT in units
+    of FFT bins (zero padding included). ``E(1) = 1`` (a tone midway between two bins).
 
     Parameters
     ----------
@@ -126,25 +127,24 @@ def sidelobe_envelope(window: np.ndarray, fft_size: int, num_lags: int,
     num_lags
         Lags returned.
     oversample
-        Evaluation points per bin.
+        Evaluation points per bin (even).
 
     Returns
     -------
     numpy.ndarray
-        float64 ``(num_lags,)``, non-increasing, ``E(0) = 1``.
+        float64 ``(num_lags,)``, ``E(0) = 1``.
     """
     w = np.asarray(window, dtype=np.float64)
-    n_eval = int(fft_size) * oversample
+    os_ = 2 * max(1, oversample // 2)
+    n_eval = int(fft_size) * os_
     resp = np.abs(np.fft.fft(w, n_eval)) ** 2
-    resp = resp / resp[0]
-    half = resp[: n_eval // 2 + 1]
-    # |W(δ)|² is even for a real window; tail maximum from δ on.
-    tail = np.maximum.accumulate(half[::-1])[::-1]
+    j = np.arange(-os_ // 2, os_ // 2 + 1)                      # δ = j / os_
     lags = np.arange(num_lags)
-    start = np.clip(np.round((lags - 0.5) * oversample).astype(np.int64), 0, half.size - 1)
-    env = tail[start]
+    num = resp[(lags[:, None] * os_ - j[None, :]) % n_eval]
+    den = resp[j % n_eval][None, :]
+    env = (num / np.maximum(den, 1e-300)).max(axis=1)
     env[0] = 1.0
-    return env
+    return np.minimum(env, 1.0)
 
 
 def sidelobe_mask(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndarray,
