@@ -179,14 +179,17 @@ def sidelobe_mask(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndar
     keep = np.ones(k, dtype=bool)
     if k < 2:
         return keep
-    dd = np.abs(doppler_bin[:, None] - doppler_bin[None, :])
-    dd = np.minimum(dd, num_doppler - dd)
-    dr = np.abs(range_bin[:, None] - range_bin[None, :])
-    leak = (env_doppler[np.minimum(dd, env_doppler.size - 1)]
-            * env_range[np.minimum(dr, env_range.size - 1)])            # (i, j)
-    stronger = power[None, :] > power[:, None]
-    explained = stronger & (excess[:, None] < margin * power[None, :] * leak)
-    keep &= ~explained.any(axis=1)
+    step = max(1, (1 << 20) // k)                  # bound the (rows, K) work arrays
+    for i0 in range(0, k, step):
+        i = slice(i0, min(k, i0 + step))
+        dd = np.abs(doppler_bin[i, None] - doppler_bin[None, :])
+        dd = np.minimum(dd, num_doppler - dd)
+        dr = np.abs(range_bin[i, None] - range_bin[None, :])
+        leak = (env_doppler[np.minimum(dd, env_doppler.size - 1)]
+                * env_range[np.minimum(dr, env_range.size - 1)])        # (i, j)
+        stronger = power[None, :] > power[i, None]
+        explained = stronger & (excess[i, None] < margin * power[None, :] * leak)
+        keep[i] = ~explained.any(axis=1)
     return keep
 
 
