@@ -565,20 +565,27 @@ class RadarProcessor:
         if self._pairs is not None:
             score = self._pairs.scores(vecs.reshape(ntx * nrx, k).T, hyps)
         else:
-            ph = alias_phase(ntx, hyps)                                        # (tx, H)
-            cand = vecs[:, :, :, None] * ph[:, None, None, :]                  # (tx, rx, K, H)
-            el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
-            spectra = bartlett_spectrum(self.detection_grid,
-                                        el.reshape(el.shape[0], k * hyps.size).T,
-                                        workers=self.settings.workers)
             g = self.detection_grid
-            vis = np.where(self._visible[None], spectra, 0.0)
-            score = vis.reshape(k, hyps.size, g.num_el * g.num_az).max(axis=2)
-            spectra = spectra.reshape(k, hyps.size, g.num_el, g.num_az)
+            ph = alias_phase(ntx, hyps)                                        # (tx, H)
+            score = np.empty((k, hyps.size))
+            spectra = np.empty((k, g.num_el, g.num_az), dtype=np.float32)
+            step = 256                                  # bounds the (K·H, el, az) spectra
+            for k0 in range(0, k, step):
+                ks = slice(k0, min(k, k0 + step))
+                kk = ks.stop - k0
+                cand = vecs[:, :, ks, None] * ph[:, None, None, :]             # (tx, rx, k, H)
+                el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
+                spec = bartlett_spectrum(g, el.reshape(el.shape[0], kk * hyps.size).T,
+                                         workers=self.settings.workers)
+                vis = np.where(self._visible[None], spec, 0.0)
+                sc = vis.reshape(kk, hyps.size, g.num_el * g.num_az).max(axis=2)
+                sc = np.where(allowed[ks], sc, -np.inf)
+                score[ks] = sc
+                spectra[ks] = spec.reshape(kk, hyps.size, g.num_el, g.num_az)[
+                    np.arange(kk), np.argmax(sc, axis=1)]
         score = np.where(allowed, score, -np.inf)
         best = np.argmax(score, axis=1) if k else np.zeros(0, dtype=np.int64)
-        chosen = None if spectra is None else spectra[np.arange(k), best]
-        return hyps[best], chosen
+        return hyps[best], spectra
 
     def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
