@@ -17,8 +17,13 @@ from .errors import (
     DataWarning,
     ExtrapolationError,
     FormatError,
+    FrameIndexError,
     MissingDataError,
+    MissingDependencyError,
     OutputExistsError,
+    ReadError,
+    SettingsError,
+    WriteError,
 )
 
 __all__ = [
@@ -30,12 +35,34 @@ __all__ = [
     "Dataset",
     "ExtrapolationError",
     "FormatError",
+    "FrameIndexError",
     "MissingDataError",
+    "MissingDependencyError",
     "OutputExistsError",
     "RadarCalib",
+    "ReadError",
     "Sequence",
+    "SettingsError",
+    "WriteError",
     "__version__",
     "load_calibration",
     "open_dataset",
     "open_sequence",
 ]
+
+# Subpackages reachable as attributes (``cr.dsp``, ``cr.viz``...) but imported only when first
+# used, so that ``import coloradar`` stays light (no matplotlib, no simulator).
+_SUBPACKAGES = frozenset({"batch", "calib", "cli", "dataset", "demo", "dsp", "errors", "formats",
+                          "geometry", "odometry", "progress", "sim", "viz"})
+
+
+def __getattr__(name: str) -> object:
+    if name in _SUBPACKAGES:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | _SUBPACKAGES)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import SettingsError
 from .antenna import AntennaConfig
 from .heatmap_grid import HeatmapConfig, shipped_angle_bins
 from .sensor import Calibration, RadarCalib
@@ -72,7 +73,7 @@ def preset_radar(name: str) -> RadarCalib:
         return RadarCalib("single_chip", w, AntennaConfig(76.8e9, np.array(_SINGLE_RX),
                                                           np.array(_SINGLE_TX)),
                           _grid(64, 16, 64, w.range_bin_width))
-    raise ValueError(f"unknown radar {name!r}")
+    raise SettingsError(f"unknown radar {name!r}")
 
 
 def preset_calibration() -> Calibration:

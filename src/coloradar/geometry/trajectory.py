@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from .._arrays import readonly
-from ..errors import DataWarning, ExtrapolationError, FormatError
+from ..errors import DataWarning, ExtrapolationError, FormatError, SettingsError
 from .se3 import SE3, rotate
 
 __all__ = ["ExtrapolationError", "Trajectory", "trajectory_from_groundtruth"]
@@ -51,8 +51,8 @@ class Trajectory:
         if r.single:
             r = Rotation.concatenate([r])
         if p.shape != (t.size, 3) or len(r) != t.size:
-            raise ValueError(f"{self.name}: {t.size} timestamps, translations {p.shape}, "
-                             f"{len(r)} rotations")
+            raise SettingsError(f"{self.name}: {t.size} timestamps, translations {p.shape}, "
+                                f"{len(r)} rotations")
         if t.size == 0:
             raise FormatError(f"{self.name}: a trajectory needs at least one pose")
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p))):
@@ -190,7 +190,7 @@ class Trajectory:
         """
         p = np.asarray(points, dtype=np.float64)
         if p.shape != (len(self), 3):
-            raise ValueError(f"expected ({len(self)}, 3) points, one per pose, got {p.shape}")
+            raise SettingsError(f"expected ({len(self)}, 3) points, one per pose, got {p.shape}")
         return rotate(self.rotations, p) + self.translations
 
     # -- interpolation ------------------------------------------------------------------------
@@ -244,8 +244,8 @@ class Trajectory:
         """
         t = np.asarray(times, dtype=np.float64).reshape(-1)
         if np.any(np.diff(t) <= 0):
-            raise ValueError("interpolate: times must be strictly increasing; use "
-                             "interpolate_arrays for times in any order")
+            raise SettingsError("interpolate: times must be strictly increasing; use "
+                                "interpolate_arrays for times in any order")
         trans, rot = self.interpolate_arrays(t, tolerance)
         return Trajectory(t, trans, rot, self.name)
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..errors import SettingsError
 from .paths import EllipsePath, LinePath, Path, Sinusoids
 
 __all__ = ["MOTION_PROFILES", "RigState", "RigTrajectory", "make_trajectory"]
@@ -189,15 +190,15 @@ def make_trajectory(path: Path, profile: str = "smooth",
         unambiguous velocity (cascade 1.76 m/s, single chip 2.45 m/s).
     """
     if profile not in MOTION_PROFILES:
-        raise ValueError(f"unknown motion profile {profile!r}; expected one of "
-                         f"{', '.join(MOTION_PROFILES)}")
+        raise SettingsError(f"unknown motion profile {profile!r}; expected one of "
+                            f"{', '.join(MOTION_PROFILES)}")
     spec = MOTION_PROFILES[profile]
     rng = np.random.default_rng(seed)
     if speed is not None:
         if not (np.isfinite(speed) and speed >= 0):
-            raise ValueError(f"speed must be a finite non-negative number [m/s], got {speed!r}")
+            raise SettingsError(f"speed must be a finite non-negative number [m/s], got {speed!r}")
         if not isinstance(path, EllipsePath | LinePath):
-            raise ValueError(f"{type(path).__name__} has no speed to set")
+            raise SettingsError(f"{type(path).__name__} has no speed to set")
         path = replace(path, speed=float(speed))
     elif spec["speed_factor"] != 1.0 and isinstance(path, EllipsePath | LinePath):
         path = replace(path, speed=path.speed * spec["speed_factor"])

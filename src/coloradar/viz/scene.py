@@ -19,70 +19,28 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
-from ..calib import Calibration, HeatmapConfig
-from ..errors import MissingDataError
+from ..calib import RADARS, Calibration
+from ..dsp.points import POINT_SOURCES, FramePoints, PointSource, default_point_source
+from ..errors import MissingDataError, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base, trajectory_from_groundtruth
 from ._figure import new_figure
 
 if TYPE_CHECKING:
     from mpl_toolkits.mplot3d import Axes3D
 
-__all__ = ["RADAR_STREAMS", "Scene", "draw_scene", "gather_scene", "heatmap_points",
-           "plot_scene", "radar_points", "radar_source", "scene_time"]
+__all__ = ["RADAR_STREAMS", "Scene", "draw_scene", "gather_scene", "plot_scene", "radar_points",
+           "radar_source", "scene_time"]
 
-RADAR_STREAMS = {
-    "cascade": ("cascade/pointclouds", "cascade/adc", "cascade/heatmaps"),
-    "single_chip": ("single_chip/pointclouds", "single_chip/adc", "single_chip/heatmaps"),
-}
-"""Where a radar's points come from, in order of preference: the run's point clouds, CFAR
-detections of its ADC frames (:meth:`coloradar.dsp.RadarProcessor.pointcloud`), the strongest
-cells of its heatmaps (:func:`heatmap_points`)."""
+RADAR_STREAMS = {r: tuple(f"{r}/{s}" for s in POINT_SOURCES) for r in RADARS}
+"""Where a radar's points come from, in order of preference (:data:`coloradar.dsp.POINT_SOURCES`):
+the run's point clouds, CFAR detections of its ADC frames, CFAR peaks of its heatmaps, each
+turned into points by :class:`coloradar.dsp.FramePoints`."""
 
 REFERENCE_STREAMS = ("cascade/heatmaps", "cascade/adc", "single_chip/pointclouds",
                      "single_chip/heatmaps", "single_chip/adc", "lidar/pointclouds")
 """Default stream whose frame index ``--frame`` counts."""
 
 _MARKERS = {"cascade": "o", "single_chip": "^"}
-
-
-def heatmap_points(heatmap: np.ndarray, config: HeatmapConfig, *, max_points: int = 400,
-                   dynamic_range: float = 25.0, min_range: float = 0.5) -> np.ndarray:
-    """The strongest cells of a 3-D radar heatmap as points.
-
-    Parameters
-    ----------
-    heatmap
-        float ``(el, az, range, 2)``: intensity, range rate [m/s].
-    config
-        Its grid.
-    max_points
-        Keep at most this many cells (the strongest).
-    dynamic_range
-        And only cells within this many dB of the strongest.
-    min_range
-        Skip cells nearer than this [m] (antenna coupling dominates the first bins).
-
-    Returns
-    -------
-    numpy.ndarray
-        float32 ``(K, 5)``: x y z [m] (radar frame, DESIGN.md §3), intensity, range rate [m/s].
-    """
-    hm = np.asarray(heatmap, dtype=np.float32)
-    inten = hm[..., 0].copy()
-    inten[..., config.range_bins < min_range] = 0.0
-    flat = inten.reshape(-1)
-    k = min(max_points, flat.size)
-    top = np.argpartition(flat, flat.size - k)[flat.size - k:]
-    peak = float(flat.max())
-    if peak <= 0:
-        return np.zeros((0, 5), dtype=np.float32)
-    top = top[flat[top] >= peak * 10.0 ** (-dynamic_range / 10.0)]
-    e, a, r = np.unravel_index(top, inten.shape)
-    rng = config.range_bins[r]
-    el, az = config.elevation_bins[e], config.azimuth_bins[a]
-    xyz = np.stack([rng * np.cos(el) * np.cos(az), rng * np.cos(el) * np.sin(az),
-                    rng * np.sin(el)], axis=1)
-    return np.column_stack([xyz, flat[top], hm[..., 1].reshape(-1)[top]]).astype(np.float32)
 
 
 @dataclass
@@ -117,35 +75,27 @@ class Scene:
     sources: dict[str, tuple[int, float]] = field(default_factory=dict)
 
 
-def _processor(seq, radar: str, cache: dict):
-    key = ("processor", radar)
-    if key not in cache:
-        try:
-            from ..dsp import RadarProcessor
-        except ImportError:  # pragma: no cover - dsp is part of the package
-            cache[key] = None
-        else:
-            cache[key] = RadarProcessor(seq.calib.radar(radar))
-    return cache[key]
-
-
 def radar_source(seq, radar: str, cache: dict | None = None) -> str | None:
     """The stream a radar's points are taken from (see :data:`RADAR_STREAMS`), or None."""
-    for name in RADAR_STREAMS[radar]:
-        if _has(seq, name) and (not name.endswith("/adc")
-                                or _processor(seq, radar, {} if cache is None else cache)):
-            return name
-    return None
+    radars = getattr(getattr(seq, "layout", None), "radars", RADARS)
+    src = default_point_source(seq, radar) if radar in radars else None
+    return None if src is None else f"{radar}/{src}"
 
 
 def radar_points(seq, radar: str, name: str, data: np.ndarray, *, max_points: int = 400,
                  cache: dict | None = None) -> np.ndarray:
-    """float32 ``(N, 5)`` points (radar frame) of one frame ``data`` read from stream ``name``."""
-    if name.endswith("/heatmaps"):
-        return heatmap_points(data, seq.calib.radar(radar).heatmap, max_points=max_points)
-    if name.endswith("/adc"):
-        return _processor(seq, radar, {} if cache is None else cache).pointcloud(data)
-    return np.asarray(data, dtype=np.float32)
+    """float32 ``(N, 5)`` points (radar frame) of one frame ``data`` read from stream ``name``
+    (:class:`coloradar.dsp.FramePoints`; at most ``max_points``, the strongest)."""
+    cache = {} if cache is None else cache
+    key = ("points", name, max_points)
+    if key not in cache:
+        source = cast(PointSource, name.split("/", 1)[1])
+        grid = None
+        if source == "heatmaps" and hasattr(seq, "radar"):
+            grid = seq.radar(radar).heatmap_config      # the grid the heatmaps were made on
+        cache[key] = FramePoints(seq.calib.radar(radar), source, heatmap_config=grid,
+                                 max_points=max_points)
+    return cache[key](data)
 
 
 def _has(seq, stream: str) -> bool:
@@ -156,10 +106,7 @@ def _has(seq, stream: str) -> bool:
 
 
 def _stream(seq, name: str):
-    sensor, product = name.split("/")
-    if product == "adc":
-        return seq.radar(sensor).adc
-    return getattr(getattr(seq, sensor), product)
+    return seq.stream(name)
 
 
 def scene_time(seq, index: int, stream: str | None = None) -> tuple[float, str]:
@@ -237,7 +184,7 @@ def gather_scene(seq, time: float, *, frame: str = "base",
     max_lidar_points
         Evenly thin lidar scans to at most this many points.
     max_radar_points
-        Cells kept per radar heatmap (:func:`heatmap_points`).
+        Points kept per radar frame, the strongest (:class:`coloradar.dsp.FramePoints`).
     trajectory
         ``world_T_base(t)``; default the run's ground truth when present.
     cache
@@ -257,14 +204,16 @@ def gather_scene(seq, time: float, *, frame: str = "base",
             cache[key] = make()
         return cache[key]
 
-    def read(name: str, i: int) -> np.ndarray:
-        return cached(name, i, lambda: _stream(seq, name)[i])
+    def read(name: str, i: int) -> np.ndarray | None:
+        # A bad frame is reported once (DataWarning) and its sensor left out of the picture,
+        # so that an animation goes on, as `coloradar process` skips a bad frame.
+        return cached(name, i, lambda: _stream(seq, name).read_or_skip(i))
 
     if "lidar" in sensors and _has(seq, "lidar/pointclouds"):
         ts = _stream(seq, "lidar/pointclouds").timestamps
         i = _latest(ts, time, max_age)
-        if i is not None:
-            cloud = read("lidar/pointclouds", i)
+        cloud = None if i is None else read("lidar/pointclouds", i)
+        if i is not None and cloud is not None:
             step = max(1, int(np.ceil(len(cloud) / max_lidar_points)))
             pts = cloud[::step, :3]
             pts = pts[np.all(np.isfinite(pts), axis=1) & (np.abs(pts).sum(axis=1) > 0)]
@@ -278,10 +227,12 @@ def gather_scene(seq, time: float, *, frame: str = "base",
             continue
         ts = _stream(seq, name).timestamps
         i = _latest(ts, time, max_age)
-        if i is None:
+        frame_data = None if i is None else read(name, i)
+        if i is None or frame_data is None:
             continue
-        data = cached(f"{name}:points", i, lambda name=name, i=i, radar=radar: radar_points(
-            seq, radar, name, read(name, i), max_points=max_radar_points, cache=cache))
+        data = cached(f"{name}:points", i, lambda name=name, i=i, radar=radar, d=frame_data:
+                      radar_points(seq, radar, name, d, max_points=max_radar_points,
+                                   cache=cache))
         pose = framer.pose(radar, float(ts[i]))
         scene.radars[radar] = np.column_stack([pose.apply(data[:, :3].astype(np.float32)),
                                                data[:, 4]]).astype(np.float32)
@@ -358,7 +309,7 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
         if extent is not None and scene.rig is not None:
             scene = _clip_3d(scene, scene.rig[0], extent)
     else:
-        raise ValueError(f"view must be 'bev' or '3d', got {view!r}")
+        raise SettingsError(f"view must be 'bev' or '3d', got {view!r}")
     if scene.lidar is not None and len(scene.lidar):
         if view == "bev":
             u, v = uv(scene.lidar)
