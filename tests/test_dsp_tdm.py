@@ -24,7 +24,7 @@ def test_boresight_mover_is_in_phase_on_every_channel_after_compensation(name, k
     rd = doppler_fft(range_fft(adc, "none"), "none")
     cell = (slice(None), slice(None), w.num_chirps // 2 + k, 60)
     raw = rd[cell]
-    # before: TX slot t lags by the Doppler phase over t·Tc (DESIGN.md §3 timing)
+    # before: TX slot t lags by the Doppler phase over t·Tc (docs/conventions.md §3 timing)
     t_slot = slow_times(calib)[:, 0]
     expected = np.exp(2j * np.pi * (2 * v / w.wavelength) * t_slot)
     np.testing.assert_allclose(raw / raw[0, 0], np.broadcast_to(expected[:, None], raw.shape),

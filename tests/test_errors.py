@@ -236,9 +236,24 @@ def test_output_that_is_a_file_or_under_a_file(root, tmp_path, capsys):
     code, _, err = _cli(["plot", root / RUN, "--view", "range-doppler", "--out",
                          afile / "x.png"], capsys)
     assert code == 1 and "afile" in _one_error_line(err)
+    code, _, err = _cli(["odometry", root / RUN, "--radar", "single_chip", "--out", afile,
+                         "--quiet"], capsys)
+    assert code == 1 and "expected an output folder" in _one_error_line(err)
+    code, _, err = _cli(["odometry", root / RUN, "--radar", "single_chip", "--out",
+                         afile / "sub", "--quiet"], capsys)
+    assert code == 1 and "afile" in _one_error_line(err)
     assert afile.read_text() == "keep me"
     with pytest.raises(WriteError):
         fm.write_timestamps(afile / "timestamps.txt", np.zeros(2))
+
+
+def test_map_checks_the_output_name_before_reading(root, tmp_path, capsys, monkeypatch):
+    def no_reading(*a, **k):  # the name is refused before any frame is read
+        raise AssertionError("read a frame")
+
+    monkeypatch.setattr(cr.dataset.FrameStream, "read", no_reading)
+    code, _, err = _cli(["map", root / RUN, "--out", tmp_path / "m.txt"], capsys)
+    assert code == 1 and ".pcd or .ply" in _one_error_line(err)
 
 
 def test_cfar_window_settings(root, tmp_path, capsys):

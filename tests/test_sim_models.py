@@ -203,7 +203,7 @@ def test_channel_errors_are_undone_by_the_design_calibration_formula():
     clean = radar_frame(calib, model, targets, channel_errors=None, coupling_adc=None, rng=g)
     bad = radar_frame(calib, model, targets, channel_errors=pf, coupling_adc=None, rng=g)
     assert np.abs(bad - clean).max() > 0.5 * np.abs(clean).max()
-    # DESIGN.md §2, written out: A·exp(−j2π(f−f00)·(S/S_cal)(fs_cal/fs)·n/Ns)·P00/P.
+    # docs/conventions.md §2, written out: A·exp(−j2π(f−f00)·(S/S_cal)(fs_cal/fs)·n/Ns)·P00/P.
     ns = calib.waveform.num_samples
     n = np.arange(ns)
     df = (pf.frequency - pf.frequency[0, 0]) * (calib.waveform.slope / pf.slope) \
@@ -314,7 +314,7 @@ def test_moving_person_scatterers_move_with_their_path():
 
 @pytest.mark.parametrize("precision", ["double", "single"])
 def test_if_model_against_a_loop_over_the_documented_formula(precision):
-    """Each (TX, RX, chirp) built with explicit loops from the formula of DESIGN.md §3:
+    """Each (TX, RX, chirp) built with explicit loops from the formula of docs/conventions.md §3:
     exp(+j2π((f0 + S·t_n)·τ0 + f_c·(τ − τ0))), τ = (2(R + vr·T) − u·p_tx − u·p_rx)/c,
     T = (c·Ntx + t)·(idle + ramp_end)."""
     from coloradar.calib.waveform import SPEED_OF_LIGHT as C0

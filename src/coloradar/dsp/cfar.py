@@ -37,7 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from math import comb
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 from scipy import integrate, optimize, special, stats
@@ -45,12 +45,17 @@ from scipy.ndimage import correlate1d, rank_filter
 
 from ..errors import SettingsError
 
-__all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "effective_train_cells",
-           "false_alarm_rate", "power_correlation"]
+__all__ = ["CFAR_EDGES", "CFAR_KINDS", "CFAREdge", "CFARKind", "CFARResult", "cfar", "cfar_scale",
+           "cfar_window", "effective_train_cells", "false_alarm_rate", "power_correlation"]
 
-CFAR_KINDS = ("ca", "go", "so", "os")
+CFARKind = Literal["ca", "go", "so", "os"]
+"""Cell-averaging, greatest-of, smallest-of, ordered-statistic."""
+CFAR_KINDS: tuple[CFARKind, ...] = get_args(CFARKind)
+CFAREdge = Literal["wrap", "mirror", "reflect", "truncate"]
+"""Edge handling of one axis (see :func:`cfar`)."""
+CFAR_EDGES: tuple[CFAREdge, ...] = get_args(CFAREdge)
 # name -> (scipy.ndimage mode, np.pad mode)
-_MODES: dict[str, tuple[str, Literal["wrap", "reflect", "symmetric", "constant"]]] = {
+_MODES: dict[CFAREdge, tuple[str, Literal["wrap", "reflect", "symmetric", "constant"]]] = {
     "wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"), "reflect": ("reflect", "symmetric"),
     "truncate": ("constant", "constant")}
 
@@ -176,7 +181,7 @@ def _os_rank(rank: float | int, n: int) -> int:
     return k
 
 
-def false_alarm_rate(kind: str, scale: float, num_train: float, *, rank: int = 0,
+def false_alarm_rate(kind: CFARKind, scale: float, num_train: float, *, rank: int = 0,
                      looks: float = 1, numeric: bool = False) -> float:
     """False-alarm probability of a CFAR with multiplier ``scale`` on noise-only cells.
 
@@ -215,7 +220,7 @@ def false_alarm_rate(kind: str, scale: float, num_train: float, *, rank: int = 0
     return _numeric_pfa(kind, a, n, rank, L)
 
 
-def _numeric_pfa(kind: str, a: float, n: float, k: int, L: float) -> float:
+def _numeric_pfa(kind: CFARKind, a: float, n: float, k: int, L: float) -> float:
     """``E[Q(L, α·Z)]`` over the distribution of the statistic ``Z`` (unit-exponential looks)."""
     if kind == "ca":                       # Z = mean of n cells: Gamma(nL, scale 1/n)
         g = stats.gamma(n * L, scale=1.0 / n)
@@ -248,7 +253,7 @@ def _numeric_pfa(kind: str, a: float, n: float, k: int, L: float) -> float:
 
 
 @lru_cache(maxsize=256)
-def cfar_scale(kind: str, num_train: float, pfa: float, *, rank: int = 0,
+def cfar_scale(kind: CFARKind, num_train: float, pfa: float, *, rank: int = 0,
                looks: float = 1) -> float:
     """The multiplier ``α`` that gives false-alarm probability ``pfa``.
 
@@ -282,7 +287,8 @@ def cfar_scale(kind: str, num_train: float, pfa: float, *, rank: int = 0,
     return float(np.exp(optimize.brentq(f, -30.0, hi, xtol=1e-12)))
 
 
-def _box_sum(x: np.ndarray, lo: list[int], hi: list[int], modes: tuple[str, ...]) -> np.ndarray:
+def _box_sum(x: np.ndarray, lo: list[int], hi: list[int], modes: tuple[CFAREdge, ...]
+             ) -> np.ndarray:
     """Sum of ``x`` over offsets ``lo[a] … hi[a]`` along every axis (separable, no cancellation)."""
     out = x
     for ax, (a, b, mode) in enumerate(zip(lo, hi, modes, strict=True)):
@@ -293,7 +299,7 @@ def _box_sum(x: np.ndarray, lo: list[int], hi: list[int], modes: tuple[str, ...]
     return out
 
 
-def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tuple[str, ...],
+def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tuple[CFAREdge, ...],
               side: int = 0, axis: int = 0) -> np.ndarray:
     """Sum over the training cells (side 0), or over one half of them along ``axis``
     (side −1: offsets −h…−1, side +1: offsets 1…h)."""
@@ -309,9 +315,9 @@ def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tupl
     return s
 
 
-def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
+def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] = 1,
          train: int | tuple[int, ...] = 8, pfa: float = 1e-3, *, rank: float | int = 0.75,
-         looks: float = 1, mode: str | tuple[str, ...] = "wrap", split_axis: int = -1,
+         looks: float = 1, mode: CFAREdge | tuple[CFAREdge, ...] = "wrap", split_axis: int = -1,
          cell_factor: float = 1.0, excise: bool = False) -> CFARResult:
     """Run a CFAR detector on a power map of any dimension.
 

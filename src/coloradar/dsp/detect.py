@@ -17,7 +17,7 @@ from scipy.ndimage import maximum_filter
 from ..calib import HeatmapConfig
 from ..errors import FormatError
 from .array import sines_to_unit
-from .cfar import cfar
+from .cfar import CFAREdge, CFARKind, cfar
 
 __all__ = ["Detections", "channel_noise", "heatmap_cell_xyz", "heatmap_pointcloud", "local_maxima",
            "sidelobe_envelope", "sidelobe_mask"]
@@ -76,7 +76,7 @@ class Detections:
         return out
 
 
-def local_maxima(power: np.ndarray, mode: str | tuple[str, ...]) -> np.ndarray:
+def local_maxima(power: np.ndarray, mode: CFAREdge | tuple[CFAREdge, ...]) -> np.ndarray:
     """bool mask of cells not smaller than any of their neighbours (3 cells per axis)."""
     return power >= maximum_filter(power, size=3, mode=mode)
 
@@ -219,7 +219,7 @@ def heatmap_cell_xyz(config: HeatmapConfig, el: np.ndarray, az: np.ndarray,
     return (np.asarray(rng) * config.range_bin_width)[..., None] * u
 
 
-def heatmap_pointcloud(heatmap: np.ndarray, config: HeatmapConfig, *, kind: str = "ca",
+def heatmap_pointcloud(heatmap: np.ndarray, config: HeatmapConfig, *, kind: CFARKind = "ca",
                        guard: int | tuple[int, int, int] = (0, 1, 1),
                        train: int | tuple[int, int, int] = (0, 4, 4), pfa: float = 1e-4,
                        threshold: float | None = None, min_range: float = 0.0,

@@ -8,7 +8,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
       − coupling signal            (cube.coupling_signal: subtracting it = subtracting the file's
                                     unwindowed range FFT)
       − mean per chirp             (DC removal, optional)
-      × G[t, r, n]                 (cascade phase/frequency calibration, DESIGN.md §2)
+      × G[t, r, n]                 (cascade phase/frequency calibration, docs/conventions.md §2)
       × range window × Doppler window × (−1)^c    (unit coherent gain; (−1)^c = fftshift)
       → range FFT, keep the first num_range_bins → Doppler FFT
       × exp(−j2π k t/(n·Ntx))      (TDM-MIMO compensation)            = range_doppler(adc)
@@ -20,7 +20,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
@@ -29,9 +29,11 @@ from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
 from ..errors import FormatError, SettingsError
 from .angle import bartlett_spectrum, capon_spectrum, refine_peak
-from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
+from .array import OVERLAP_MODES, OverlapMode, angle_grid, combine_channels, sines_to_unit
 from .cfar import (
     CFAR_KINDS,
+    CFAREdge,
+    CFARKind,
     cfar,
     cfar_window,
     effective_train_cells,
@@ -41,12 +43,20 @@ from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_mask
 from .heatmap import heatmap_from_elements
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
-from .windows import WINDOWS, coherent_window, window
+from .windows import WINDOWS, WindowName, coherent_window, window
 
-__all__ = ["NOISE_WEIGHTINGS", "ProcessingSettings", "RadarProcessor"]
+__all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AngleMethod", "CouplingDomain",
+           "NoiseWeighting", "ProcessingSettings", "RadarProcessor"]
 
-NOISE_WEIGHTINGS = ("whiten", "off")
-"""Choices of :attr:`ProcessingSettings.noise_weighting`."""
+CouplingDomain = Literal["raw", "calibrated"]
+"""What the coupling file is the range FFT of: uncalibrated or calibrated samples."""
+COUPLING_DOMAINS: tuple[CouplingDomain, ...] = get_args(CouplingDomain)
+AngleMethod = Literal["fft", "capon"]
+"""Detection angles by Bartlett (FFT) or Capon (MVDR) beamforming."""
+ANGLE_METHODS: tuple[AngleMethod, ...] = get_args(AngleMethod)
+NoiseWeighting = Literal["whiten", "off"]
+"""How channels are summed for detection (:attr:`ProcessingSettings.noise_weighting`)."""
+NOISE_WEIGHTINGS: tuple[NoiseWeighting, ...] = get_args(NoiseWeighting)
 
 
 @dataclass(frozen=True)
@@ -76,7 +86,7 @@ class ProcessingSettings:
     overlap
         Virtual pairs sharing a position: ``"first"`` (TX-major first pair) or ``"average"``.
     azimuth_sign, elevation_sign
-        +1 when the antenna file's az (el) axis grows toward +y (+z) (DESIGN.md §3); −1 mirrors.
+        +1 when the antenna file's az (el) axis grows toward +y (+z) (docs/conventions.md §3); −1 mirrors.
     cfar_kind, cfar_guard, cfar_train, pfa, cfar_rank
         CFAR on the range–Doppler power map; guard/train are (Doppler, range) half-widths;
         ``pfa`` the false-alarm probability per cell for noise (the map sums Ntx·Nrx channels,
@@ -122,41 +132,41 @@ class ProcessingSettings:
         frames belongs to the batch layer (one process per core).
     """
 
-    range_window: str = "hann"
-    doppler_window: str = "hann"
+    range_window: WindowName = "hann"
+    doppler_window: WindowName = "hann"
     range_fft_size: int | None = None
     doppler_fft_size: int | None = None
     num_range_bins: int | None = None
     dc_removal: bool = True
     phase_frequency_calibration: bool = True
     coupling_subtraction: bool = True
-    coupling_domain: str = "raw"
+    coupling_domain: CouplingDomain = "raw"
     tdm_compensation: bool = True
-    overlap: str = "first"
+    overlap: OverlapMode = "first"
     azimuth_sign: int = 1
     elevation_sign: int = 1
-    cfar_kind: str = "ca"
+    cfar_kind: CFARKind = "ca"
     cfar_guard: tuple[int, int] = (1, 2)
     cfar_train: tuple[int, int] = (2, 8)
     pfa: float = 1e-4
     cfar_rank: float = 0.75
     cfar_excision: bool = True
-    noise_weighting: str = "whiten"
+    noise_weighting: NoiseWeighting = "whiten"
     doppler_unwrap: float = 5.0
     heatmap_unwrap: bool = False
     sidelobe_guard: bool = True
     sidelobe_margin_db: float = 6.0
     min_range: float = 0.3
     peak_grouping: bool = True
-    angle_method: str = "fft"
+    angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
     workers: int = 1
 
     def __post_init__(self) -> None:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
-                   "coupling_domain": ("raw", "calibrated"), "overlap": OVERLAP_MODES,
-                   "cfar_kind": CFAR_KINDS, "angle_method": ("fft", "capon"),
+                   "coupling_domain": COUPLING_DOMAINS, "overlap": OVERLAP_MODES,
+                   "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
                    "noise_weighting": NOISE_WEIGHTINGS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1)}
         for name, allowed in choices.items():
@@ -491,7 +501,7 @@ class RadarProcessor:
         s = self.settings
         # Range edges: training cells beyond the map are left out ("truncate"), not mirrored
         # (mirrored copies made the edge cells fire ~5x too often). OS needs a full window.
-        cmodes = ("wrap", "mirror" if s.cfar_kind == "os" else "truncate")
+        cmodes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror" if s.cfar_kind == "os" else "truncate")
         # DC removal notches the first range bins (the window spreads the notch): they would
         # lower the noise estimate of their neighbours, so the CFAR map starts after them.
         r0 = max(0, min(self._notch_bins, stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
@@ -507,7 +517,7 @@ class RadarProcessor:
     def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
         s = self.settings
         stat, plain, looks = self._detection_map(rd)
-        modes = ("wrap", "mirror")
+        modes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror")   # (Doppler, range)
         mask, noise = self._cfar_mask(stat, looks)
         if s.peak_grouping:
             mask &= local_maxima(stat, modes)

@@ -1,7 +1,7 @@
 """Stage 4: TDM-MIMO Doppler phase compensation.
 
 With time-division MIMO, TX slot ``t`` of chirp loop ``c`` starts at ``(c·Ntx + t)·Tc``
-(DESIGN.md §3). A target whose Doppler frequency is ``k/n`` cycles per loop (signed Doppler bin
+(docs/conventions.md §3). A target whose Doppler frequency is ``k/n`` cycles per loop (signed Doppler bin
 ``k`` of an ``n``-point Doppler FFT) therefore reaches TX slot ``t`` with an extra phase
 ``2π·k·t/(n·Ntx)``, which the angle FFT would read as a spurious angle. Compensation multiplies
 TX ``t`` by ``exp(−j2π·k·t/(n·Ntx))``, exact at bin centres and for fractional ``k``.

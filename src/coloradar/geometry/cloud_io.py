@@ -17,8 +17,8 @@ import numpy as np
 from ..errors import FormatError, SettingsError
 from ..formats.atomic import atomic_write_bytes, new_output_path
 
-__all__ = ["default_fields", "read_pcd", "read_ply", "read_point_file", "write_pcd",
-           "write_ply", "write_point_file"]
+__all__ = ["check_point_file_name", "default_fields", "read_pcd", "read_ply", "read_point_file",
+           "write_pcd", "write_ply", "write_point_file"]
 
 _PCD_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "<i1", ("I", 2): "<i2",
               ("I", 4): "<i4", ("I", 8): "<i8", ("U", 1): "<u1", ("U", 2): "<u2",
@@ -229,12 +229,25 @@ def write_point_file(path: str | os.PathLike[str], points: np.ndarray,
                      fields: Sequence[str] | None = None, *, binary: bool = True,
                      overwrite: bool = False) -> Path:
     """:func:`write_pcd` or :func:`write_ply` by the file's suffix (``.pcd``, ``.ply``)."""
-    suffix = Path(path).suffix.lower()
+    suffix = check_point_file_name(path).suffix.lower()
     if suffix == ".pcd":
         return write_pcd(path, points, fields, binary=binary, overwrite=overwrite)
-    if suffix == ".ply":
-        return write_ply(path, points, fields, binary=binary, overwrite=overwrite)
-    raise FormatError(f"{path}: expected a .pcd or .ply file name")
+    return write_ply(path, points, fields, binary=binary, overwrite=overwrite)
+
+
+def check_point_file_name(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a :class:`~pathlib.Path` after checking that it names a point file this
+    module writes (``.pcd`` or ``.ply``): a check to make before a long computation.
+
+    Raises
+    ------
+    FormatError
+        For any other suffix.
+    """
+    p = Path(path)
+    if p.suffix.lower() not in (".pcd", ".ply"):
+        raise FormatError(f"{p}: expected a .pcd or .ply file name")
+    return p
 
 
 def read_point_file(path: str | os.PathLike[str]) -> tuple[np.ndarray, tuple[str, ...]]:

@@ -1,6 +1,6 @@
 """Radar ego-velocity from the range rates of one point cloud (RANSAC, then least squares).
 
-Model (DESIGN.md §3: range rate > 0 = receding). A static point seen in direction ``d_i``
+Model (docs/conventions.md §3: range rate > 0 = receding). A static point seen in direction ``d_i``
 (unit vector, sensor frame) by a sensor whose origin moves with velocity ``v`` (sensor frame)
 has range rate::
 

@@ -3,7 +3,7 @@
 ``world_T_base(t)``: the world frame is z up (gravity along −z). The rig's *forward frame* F
 (x forward, y left, z up) has ``world_R_F = Rz(ψ)·Ry(θ)·Rx(φ)`` with the heading
 ``ψ = ψ_path + δψ(t)`` and pitch ``θ = δθ(t)`` and roll ``φ = δφ(t)`` sums of sinusoids; the
-base frame (x right, y forward, z up, DESIGN.md §3) is F turned by −90° about z. The position
+base frame (x right, y forward, z up, docs/conventions.md §3) is F turned by −90° about z. The position
 is the path's plus a sum-of-sinusoids offset. Velocity, acceleration, angular velocity and
 angular acceleration follow in closed form (Euler-rate kinematics), so the IMU model and the
 truth file are exact at every timestamp.
