@@ -406,3 +406,17 @@ def test_animation_scenes_skip_and_report_a_bad_frame(copy):
     assert scene.radars  # the other sensors are still drawn
     t_good = float(seq.lidar.pointclouds.timestamps[2])
     assert gather_scene(seq, t_good, cache=cache).lidar is not None
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
+def test_every_file_reader_refuses_a_fifo(tmp_path):
+    from coloradar.sim.scene import load_scene
+
+    readers = {"map.pcd": cr.geometry.read_point_file, "map.ply": cr.geometry.read_point_file,
+               "trajectory.txt": cr.odometry.read_tum, "scene.json": load_scene,
+               "run.zip": cr.open_sequence}
+    for name, reader in readers.items():
+        fifo = tmp_path / name
+        os.mkfifo(fifo)
+        exc = _finishes(lambda reader=reader, fifo=fifo: reader(fifo))
+        assert isinstance(exc, ReadError) and str(fifo) in str(exc), (name, exc)

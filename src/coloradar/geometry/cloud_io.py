@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import FormatError, SettingsError
 from ..formats.atomic import atomic_write_bytes, new_output_path
+from ..formats.source import read_file_bytes
 
 __all__ = ["check_point_file_name", "default_fields", "read_pcd", "read_ply", "read_point_file",
            "write_pcd", "write_ply", "write_point_file"]
@@ -141,7 +142,7 @@ def read_pcd(path: str | os.PathLike[str]) -> tuple[np.ndarray, tuple[str, ...]]
         with ``COUNT k > 1`` become ``k`` columns ``name_0 .. name_{k-1}``.
     """
     name = str(path)
-    data = Path(path).read_bytes()
+    data = read_file_bytes(path)
     lines, pos = _split_header(data, b"DATA", name, "PCD")
     hdr = {ln.split()[0].upper(): ln.split()[1:] for ln in lines
            if ln and not ln.startswith("#")}
@@ -184,7 +185,7 @@ def read_ply(path: str | os.PathLike[str]) -> tuple[np.ndarray, tuple[str, ...]]
     properties become the columns. Returns ``(points, field names)`` as :func:`read_pcd`.
     """
     name = str(path)
-    data = Path(path).read_bytes()
+    data = read_file_bytes(path)
     lines, pos = _split_header(data, b"end_header", name, "PLY")
     if not lines or lines[0] != "ply":
         raise FormatError(f"{name}: not a PLY file (no 'ply' magic line)")

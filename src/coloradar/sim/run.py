@@ -58,7 +58,7 @@ from ..calib import (
     preset_radar,
     write_calibration,
 )
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..errors import ColoradarError, FormatError, MissingDataError, OutputExistsError
 from ..formats import (
     atomic_write_text,
     decode_adc,
@@ -72,6 +72,7 @@ from ..formats import (
 )
 from ..formats.atomic import atomic_write_bytes
 from ..formats.layout import COLORADAR, RunLayout, get_layout
+from ..formats.source import read_file_text
 from .imu import ImuModel, simulate_imu
 from .lidar import LidarModel, simulate_scan
 from .radar import (
@@ -694,7 +695,10 @@ def open_simulation(run_path: str | os.PathLike[str]) -> Simulation:
     cfg_path = root / "truth" / "sim_config.json"
     if not cfg_path.is_file():
         raise ColoradarError(f"{root}: not a simulated run (no truth/sim_config.json)")
-    cfg = json.loads(cfg_path.read_text(encoding="utf-8"))
+    try:
+        cfg = json.loads(read_file_text(cfg_path))
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"{cfg_path}: expected the JSON the simulator writes ({exc})") from None
     scene = load_scene(root / "truth" / "scene.json")
     traj = make_trajectory(scene.rig_path, cfg["motion"], [cfg["seed"], _STREAM_KEY["trajectory"]],
                            speed=cfg.get("speed"))
