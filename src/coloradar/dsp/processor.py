@@ -32,7 +32,7 @@ from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
 from .cfar import CFAR_KINDS, cfar, cfar_scale, cfar_window
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import Detections, local_maxima
-from .heatmap import heatmap_from_elements
+from .heatmap import ENGINES, heatmap_from_elements
 from .tdm import tdm_phase
 from .windows import WINDOWS, coherent_window
 
@@ -85,6 +85,10 @@ class ProcessingSettings:
         Threads per scipy.fft call. The default 1 is fastest for one frame on few cores (the
         heatmap's FFTs come in cache-sized chunks too small to split); parallelism across
         frames belongs to the batch layer (one process per core).
+    heatmap_engine
+        ``"auto"`` (numba when installed, else numpy), ``"numba"`` or ``"numpy"``: how the
+        heatmap's elevation transform, power and Doppler maximum run
+        (:mod:`coloradar.dsp.heatmap`); the results agree to float32 rounding.
     """
 
     range_window: str = "hann"
@@ -111,12 +115,14 @@ class ProcessingSettings:
     angle_oversample: int = 2
     capon_loading: float = 0.05
     workers: int = 1
+    heatmap_engine: str = "auto"
 
     def __post_init__(self) -> None:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
                    "coupling_domain": ("raw", "calibrated"), "overlap": OVERLAP_MODES,
                    "cfar_kind": CFAR_KINDS, "angle_method": ("fft", "capon"),
-                   "azimuth_sign": (1, -1), "elevation_sign": (1, -1)}
+                   "azimuth_sign": (1, -1), "elevation_sign": (1, -1),
+                   "heatmap_engine": ENGINES}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} = {getattr(self, name)!r}; expected one of "
@@ -314,7 +320,8 @@ class RadarProcessor:
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
-                                     workers=self.settings.workers)
+                                     workers=self.settings.workers,
+                                     engine=self.settings.heatmap_engine)
 
     def heatmap_config(self) -> HeatmapConfig:
         """The grid of :meth:`heatmap` with the true angles of its bins (for heatmap_cfg.txt).
