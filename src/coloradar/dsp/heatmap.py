@@ -69,13 +69,15 @@ def _numba_kernel() -> Callable[..., None] | None:
     @numba.njit(cache=True, fastmath={"contract"}, nogil=True)
     def peak_over_doppler(spec: Any, steer: Any, az_read: Any, velocities: Any, scale: float,
                           out: Any, r0: int) -> None:  # pragma: no cover - compiled
+        # Loops run over azimuth innermost (contiguous, vectorised); the elevation DFT over
+        # the occupied rows, the power and the running maximum stay in registers.
         rows, n, nd, naz = spec.shape
         n_el = steer.shape[0]
         n_out = az_read.shape[0]
         xr = np.empty((rows, naz), np.float32)
         xi = np.empty((rows, naz), np.float32)
-        best = np.empty((n_el, naz), np.float32)
-        arg = np.empty((n_el, naz), np.int32)
+        peak = np.empty((n, n_el, naz), np.float32)
+        bins = np.empty((n, n_el, naz), np.int32)
         re = np.empty(naz, np.float32)
         im = np.empty(naz, np.float32)
         sr = np.empty((n_el, rows), np.float32)
@@ -85,34 +87,70 @@ def _numba_kernel() -> Callable[..., None] | None:
                 sr[e, q] = steer[e, q].real
                 si[e, q] = steer[e, q].imag
         for r in range(n):
+            best, arg = peak[r], bins[r]
             best[:] = -1.0
             arg[:] = 0
             for d in range(nd):
                 for q in range(rows):               # de-interleave once, use n_el times
+                    s, xrq, xiq = spec[q, r, d], xr[q], xi[q]
                     for a in range(naz):
-                        xr[q, a] = spec[q, r, d, a].real
-                        xi[q, a] = spec[q, r, d, a].imag
-                for e in range(n_el):
-                    for a in range(naz):
-                        re[a] = sr[e, 0] * xr[0, a] - si[e, 0] * xi[0, a]
-                        im[a] = sr[e, 0] * xi[0, a] + si[e, 0] * xr[0, a]
-                    for q in range(1, rows):
-                        cr = sr[e, q]
-                        ci = si[e, q]
+                        xrq[a] = s[a].real
+                        xiq[a] = s[a].imag
+                dd = np.int32(d)
+                x0r, x0i = xr[0], xi[0]
+                if rows == 4:                       # the cascade
+                    x1r, x1i, x2r, x2i, x3r, x3i = xr[1], xi[1], xr[2], xi[2], xr[3], xi[3]
+                    for e in range(n_el):
+                        be, ag = best[e], arg[e]
+                        c0r, c0i, c1r, c1i = sr[e, 0], si[e, 0], sr[e, 1], si[e, 1]
+                        c2r, c2i, c3r, c3i = sr[e, 2], si[e, 2], sr[e, 3], si[e, 3]
                         for a in range(naz):
-                            re[a] += cr * xr[q, a] - ci * xi[q, a]
-                            im[a] += cr * xi[q, a] + ci * xr[q, a]
-                    for a in range(naz):
-                        p = re[a] * re[a] + im[a] * im[a]
-                        b = best[e, a]
-                        gt = p > b                  # first maximum wins, as argmax
-                        best[e, a] = p if gt else b
-                        arg[e, a] = d if gt else arg[e, a]
-            for e in range(n_el):
-                for j in range(n_out):
-                    a = az_read[j]
-                    out[e, j, r0 + r, 0] = best[e, a] * scale
-                    out[e, j, r0 + r, 1] = velocities[arg[e, a]]
+                            vr = (c0r * x0r[a] - c0i * x0i[a] + c1r * x1r[a] - c1i * x1i[a]
+                                  + c2r * x2r[a] - c2i * x2i[a] + c3r * x3r[a] - c3i * x3i[a])
+                            vi = (c0r * x0i[a] + c0i * x0r[a] + c1r * x1i[a] + c1i * x1r[a]
+                                  + c2r * x2i[a] + c2i * x2r[a] + c3r * x3i[a] + c3i * x3r[a])
+                            p = vr * vr + vi * vi
+                            b = be[a]
+                            gt = p > b              # first maximum wins, as argmax
+                            be[a] = p if gt else b
+                            ag[a] = dd if gt else ag[a]
+                elif rows == 2:                     # the single chip
+                    x1r, x1i = xr[1], xi[1]
+                    for e in range(n_el):
+                        be, ag = best[e], arg[e]
+                        c0r, c0i, c1r, c1i = sr[e, 0], si[e, 0], sr[e, 1], si[e, 1]
+                        for a in range(naz):
+                            vr = c0r * x0r[a] - c0i * x0i[a] + c1r * x1r[a] - c1i * x1i[a]
+                            vi = c0r * x0i[a] + c0i * x0r[a] + c1r * x1i[a] + c1i * x1r[a]
+                            p = vr * vr + vi * vi
+                            b = be[a]
+                            gt = p > b
+                            be[a] = p if gt else b
+                            ag[a] = dd if gt else ag[a]
+                else:                               # any other layout
+                    for e in range(n_el):
+                        be, ag = best[e], arg[e]
+                        c0r, c0i = sr[e, 0], si[e, 0]
+                        for a in range(naz):
+                            re[a] = c0r * x0r[a] - c0i * x0i[a]
+                            im[a] = c0r * x0i[a] + c0i * x0r[a]
+                        for q in range(1, rows):
+                            cr, ci, xqr, xqi = sr[e, q], si[e, q], xr[q], xi[q]
+                            for a in range(naz):
+                                re[a] += cr * xqr[a] - ci * xqi[a]
+                                im[a] += cr * xqi[a] + ci * xqr[a]
+                        for a in range(naz):
+                            p = re[a] * re[a] + im[a] * im[a]
+                            b = be[a]
+                            gt = p > b
+                            be[a] = p if gt else b
+                            ag[a] = dd if gt else ag[a]
+        for e in range(n_el):                       # range is the output's inner axis
+            for j in range(n_out):
+                a = az_read[j]
+                for r in range(n):
+                    out[e, j, r0 + r, 0] = peak[r, e, a] * scale
+                    out[e, j, r0 + r, 1] = velocities[bins[r, e, a]]
 
     _KERNEL = peak_over_doppler
     return _KERNEL
