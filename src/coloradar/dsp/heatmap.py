@@ -67,90 +67,126 @@ def _numba_kernel() -> Callable[..., None] | None:
         return None
 
     @numba.njit(cache=True, fastmath={"contract"}, nogil=True)
-    def peak_over_doppler(spec: Any, steer: Any, az_read: Any, velocities: Any, scale: float,
-                          out: Any, r0: int) -> None:  # pragma: no cover - compiled
-        # Loops run over azimuth innermost (contiguous, vectorised); the elevation DFT over
-        # the occupied rows, the power and the running maximum stay in registers.
+    def update(best: Any, arg: Any, d: Any, vr: Any, vi: Any) -> None:  # pragma: no cover
+        for a in range(best.size):
+            p = vr[a] * vr[a] + vi[a] * vi[a]
+            b = best[a]
+            gt = p > b                              # first maximum wins, as argmax
+            best[a] = p if gt else b
+            arg[a] = d if gt else arg[a]
+
+    @numba.njit(cache=True, fastmath={"contract"}, nogil=True)
+    def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus: Any,
+                          az_read: Any, velocities: Any, scale: float, out: Any,
+                          r0: int) -> None:  # pragma: no cover - compiled
+        # Azimuth is the innermost loop (contiguous, vectorised); the elevation DFT over the
+        # occupied rows, the power and the running Doppler maximum stay in registers.
+        # Paired (n_even >= 0): steering row p gives elevation bin el_plus[p] as E + O and
+        # el_minus[p] (FFT index + n/2) as E − O, E/O the sums over even/odd rows (rows
+        # sorted even first). Unpaired (n_even < 0): row p gives bin el_plus[p] only.
+        # The + and − maxima live in separate arrays: LLVM vectorises the loop only when it
+        # can tell the stores apart.
         rows, n, nd, naz = spec.shape
-        n_el = steer.shape[0]
-        n_out = az_read.shape[0]
+        n_st = steer.shape[0]
+        n_out = out.shape[1]
         xr = np.empty((rows, naz), np.float32)
         xi = np.empty((rows, naz), np.float32)
-        peak = np.empty((n, n_el, naz), np.float32)
-        bins = np.empty((n, n_el, naz), np.int32)
-        re = np.empty(naz, np.float32)
-        im = np.empty(naz, np.float32)
-        sr = np.empty((n_el, rows), np.float32)
-        si = np.empty((n_el, rows), np.float32)
-        for e in range(n_el):
+        peak_p = np.empty((n, n_st, naz), np.float32)
+        bins_p = np.empty((n, n_st, naz), np.int32)
+        peak_m = np.empty((n, n_st, naz), np.float32)
+        bins_m = np.empty((n, n_st, naz), np.int32)
+        er = np.empty(naz, np.float32)
+        ei = np.empty(naz, np.float32)
+        o_r = np.empty(naz, np.float32)
+        o_i = np.empty(naz, np.float32)
+        sr = np.empty((n_st, rows), np.float32)
+        si = np.empty((n_st, rows), np.float32)
+        for e in range(n_st):
             for q in range(rows):
                 sr[e, q] = steer[e, q].real
                 si[e, q] = steer[e, q].imag
+        peak_p[:] = -1.0
+        peak_m[:] = -1.0
+        bins_p[:] = 0
+        bins_m[:] = 0
         for r in range(n):
-            best, arg = peak[r], bins[r]
-            best[:] = -1.0
-            arg[:] = 0
             for d in range(nd):
-                for q in range(rows):               # de-interleave once, use n_el times
+                for q in range(rows):               # de-interleave once, use n_st times
                     s, xrq, xiq = spec[q, r, d], xr[q], xi[q]
                     for a in range(naz):
                         xrq[a] = s[a].real
                         xiq[a] = s[a].imag
                 dd = np.int32(d)
                 x0r, x0i = xr[0], xi[0]
-                if rows == 4:                       # the cascade
+                if rows == 4 and n_even == 3:       # the cascade (rows 0, 4, 6 | 1)
                     x1r, x1i, x2r, x2i, x3r, x3i = xr[1], xi[1], xr[2], xi[2], xr[3], xi[3]
-                    for e in range(n_el):
-                        be, ag = best[e], arg[e]
+                    for e in range(n_st):
                         c0r, c0i, c1r, c1i = sr[e, 0], si[e, 0], sr[e, 1], si[e, 1]
                         c2r, c2i, c3r, c3i = sr[e, 2], si[e, 2], sr[e, 3], si[e, 3]
                         for a in range(naz):
                             vr = (c0r * x0r[a] - c0i * x0i[a] + c1r * x1r[a] - c1i * x1i[a]
-                                  + c2r * x2r[a] - c2i * x2i[a] + c3r * x3r[a] - c3i * x3i[a])
+                                  + c2r * x2r[a] - c2i * x2i[a])
                             vi = (c0r * x0i[a] + c0i * x0r[a] + c1r * x1i[a] + c1i * x1r[a]
-                                  + c2r * x2i[a] + c2i * x2r[a] + c3r * x3i[a] + c3i * x3r[a])
-                            p = vr * vr + vi * vi
-                            b = be[a]
+                                  + c2r * x2i[a] + c2i * x2r[a])
+                            wr = c3r * x3r[a] - c3i * x3i[a]
+                            wi = c3r * x3i[a] + c3i * x3r[a]
+                            p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
+                            b = peak_p[r, e, a]
                             gt = p > b              # first maximum wins, as argmax
-                            be[a] = p if gt else b
-                            ag[a] = dd if gt else ag[a]
-                elif rows == 2:                     # the single chip
+                            peak_p[r, e, a] = p if gt else b
+                            bins_p[r, e, a] = dd if gt else bins_p[r, e, a]
+                            p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
+                            b = peak_m[r, e, a]
+                            gt = p > b
+                            peak_m[r, e, a] = p if gt else b
+                            bins_m[r, e, a] = dd if gt else bins_m[r, e, a]
+                elif rows == 2 and n_even == 1:     # the single chip (row 0 | 1)
                     x1r, x1i = xr[1], xi[1]
-                    for e in range(n_el):
-                        be, ag = best[e], arg[e]
+                    for e in range(n_st):
                         c0r, c0i, c1r, c1i = sr[e, 0], si[e, 0], sr[e, 1], si[e, 1]
                         for a in range(naz):
-                            vr = c0r * x0r[a] - c0i * x0i[a] + c1r * x1r[a] - c1i * x1i[a]
-                            vi = c0r * x0i[a] + c0i * x0r[a] + c1r * x1i[a] + c1i * x1r[a]
-                            p = vr * vr + vi * vi
-                            b = be[a]
+                            vr = c0r * x0r[a] - c0i * x0i[a]
+                            vi = c0r * x0i[a] + c0i * x0r[a]
+                            wr = c1r * x1r[a] - c1i * x1i[a]
+                            wi = c1r * x1i[a] + c1i * x1r[a]
+                            p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
+                            b = peak_p[r, e, a]
                             gt = p > b
-                            be[a] = p if gt else b
-                            ag[a] = dd if gt else ag[a]
+                            peak_p[r, e, a] = p if gt else b
+                            bins_p[r, e, a] = dd if gt else bins_p[r, e, a]
+                            p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
+                            b = peak_m[r, e, a]
+                            gt = p > b
+                            peak_m[r, e, a] = p if gt else b
+                            bins_m[r, e, a] = dd if gt else bins_m[r, e, a]
                 else:                               # any other layout
-                    for e in range(n_el):
-                        be, ag = best[e], arg[e]
-                        c0r, c0i = sr[e, 0], si[e, 0]
-                        for a in range(naz):
-                            re[a] = c0r * x0r[a] - c0i * x0i[a]
-                            im[a] = c0r * x0i[a] + c0i * x0r[a]
-                        for q in range(1, rows):
+                    n_e = rows if n_even < 0 else n_even
+                    for e in range(n_st):
+                        er[:] = 0.0
+                        ei[:] = 0.0
+                        o_r[:] = 0.0
+                        o_i[:] = 0.0
+                        for q in range(rows):
                             cr, ci, xqr, xqi = sr[e, q], si[e, q], xr[q], xi[q]
+                            ar, ai = (er, ei) if q < n_e else (o_r, o_i)
                             for a in range(naz):
-                                re[a] += cr * xqr[a] - ci * xqi[a]
-                                im[a] += cr * xqi[a] + ci * xqr[a]
-                        for a in range(naz):
-                            p = re[a] * re[a] + im[a] * im[a]
-                            b = be[a]
-                            gt = p > b
-                            be[a] = p if gt else b
-                            ag[a] = dd if gt else ag[a]
-        for e in range(n_el):                       # range is the output's inner axis
-            for j in range(n_out):
-                a = az_read[j]
-                for r in range(n):
-                    out[e, j, r0 + r, 0] = peak[r, e, a] * scale
-                    out[e, j, r0 + r, 1] = velocities[bins[r, e, a]]
+                                ar[a] += cr * xqr[a] - ci * xqi[a]
+                                ai[a] += cr * xqi[a] + ci * xqr[a]
+                        if n_even < 0:
+                            update(peak_p[r, e], bins_p[r, e], dd, er, ei)
+                            continue
+                        update(peak_p[r, e], bins_p[r, e], dd, er + o_r, ei + o_i)
+                        update(peak_m[r, e], bins_m[r, e], dd, er - o_r, ei - o_i)
+        for half in range(1 if n_even < 0 else 2):  # range is the output's inner axis
+            peak, bins, els = (peak_p, bins_p, el_plus) if half == 0 else (peak_m, bins_m,
+                                                                           el_minus)
+            for e in range(n_st):
+                el = els[e]
+                for j in range(n_out):
+                    a = az_read[j]
+                    for r in range(n):
+                        out[el, j, r0 + r, 0] = peak[r, e, a] * scale
+                        out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
 
     _KERNEL = peak_over_doppler
     return _KERNEL
@@ -190,6 +226,32 @@ def elevation_steering(grid: AngleGrid) -> tuple[np.ndarray, np.ndarray]:
     return rows, steer.astype(np.complex64)
 
 
+def _paired_steering(grid: AngleGrid) -> tuple[np.ndarray, np.ndarray, int, np.ndarray,
+                                               np.ndarray]:
+    """Rows (even positions first), steering and output bins for the kernel.
+
+    Bins ``k`` and ``k + n/2`` of an ``n``-point elevation DFT differ only in the sign of the
+    odd rows' share (``e^{−jπq} = (−1)^q``), so one pass gives both from ``E ± O``. Used when
+    every FFT index is an output bin (``n_el == num_el``, even); else ``n_even = −1`` and each
+    steering row gives one bin.
+    """
+    rows = np.unique(grid.el_pos)
+    rows = rows[np.argsort(rows % 2, kind="stable")]              # even positions first
+    n = grid.n_el
+    read = grid.el_read
+    if n == grid.num_el and n % 2 == 0:
+        where = np.empty(n, dtype=np.int64)
+        where[read] = np.arange(read.size)
+        k = np.arange(n // 2)
+        el_plus, el_minus, n_even = where[k], where[k + n // 2], int(np.sum(rows % 2 == 0))
+    else:
+        k = read
+        el_plus = np.arange(read.size, dtype=np.int64)
+        el_minus, n_even = el_plus, -1
+    steer = np.exp(-2j * np.pi * np.outer(k.astype(np.float64), rows) / n).astype(np.complex64)
+    return rows, steer, n_even, el_plus, el_minus
+
+
 def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.ndarray,
                           workers: int = 1, chunk_size: int = CHUNK_SIZE,
                           engine: str = "auto") -> np.ndarray:
@@ -224,26 +286,26 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
     if m != grid.num_elements or len(velocities) != nd:
         raise ValueError(f"elements {elements.shape} do not fit the grid's {grid.num_elements} "
                          f"elements and {len(velocities)} Doppler bins")
-    rows, steer = elevation_steering(grid)
-    row_of = np.searchsorted(rows, grid.el_pos)
     width = int(grid.az_pos.max()) + 1
-    n_rows, n_az, n_el = rows.size, grid.n_az, grid.num_el
+    n_rows, n_az, n_el = np.unique(grid.el_pos).size, grid.n_az, grid.num_el
     vel = np.asarray(velocities, dtype=np.float32)
     scale = np.float32(1.0 / m**2)
     out = np.empty((n_el, grid.num_az, nr, 2), dtype=np.float32)
 
     if engine == "numba":
-        rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
-        buf = np.zeros((n_rows, rc, nd, width), dtype=np.complex64)
         kernel = _numba_kernel()
         assert kernel is not None
+        rows, steer, n_even, el_plus, el_minus = _paired_steering(grid)
+        row_of = np.argsort(rows)[np.searchsorted(np.sort(rows), grid.el_pos)]
+        rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
+        buf = np.zeros((n_rows, rc, nd, width), dtype=np.complex64)
         az_read = grid.az_read.astype(np.int64)
         for r0 in range(0, nr, rc):
             n = min(nr, r0 + rc) - r0
             b = buf[:, :n]
             b[row_of, :, :, grid.az_pos] = elements[:, :, r0:r0 + n].transpose(0, 2, 1)
             spec = sfft.fft(b, n=n_az, axis=3, workers=workers)        # (rows, n, nd, n_az)
-            kernel(spec, steer, az_read, vel, float(scale), out, r0)
+            kernel(spec, steer, n_even, el_plus, el_minus, az_read, vel, float(scale), out, r0)
         return out
 
     # numpy engine: elevation FFT of the rows the aperture spans; |·| with the Doppler bin packed
