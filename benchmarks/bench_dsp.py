@@ -201,7 +201,7 @@ def main() -> None:
     for name in ("cascade", "single_chip"):
         calib, what = calibration(name, args.calib)
         proc = RadarProcessor(calib)
-        proc_np = RadarProcessor(calib, heatmap_engine="numpy")
+        proc_np = RadarProcessor(calib, engine="numpy")
         fr = frames(calib, args.frames)
         ref = scipy_chain_heatmap(calib, fr[0])
         checks = []

@@ -136,3 +136,54 @@ def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus
                 for r in range(n):
                     out[el, j, r0 + r, 0] = peak[r, e, a] * scale
                     out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
+
+
+@numba.njit(cache=True, nogil=True)
+def gather_rows(cube: Any, channels: Any, row_of: Any, az_pos: Any, r0: int,
+                buf: Any) -> None:  # pragma: no cover - compiled
+    """``buf[row_of[m], i, d, az_pos[m]] = cube[channels[m], d, r0 + i]`` for a range chunk.
+
+    ``cube`` is ``(channels, doppler, range)``; ``buf`` ``(rows, n, doppler, width)`` keeps
+    zeros where no element sits (written once, never touched here).
+    """
+    n, nd = buf.shape[1], buf.shape[2]
+    for m in range(channels.size):
+        src = cube[channels[m]]
+        q, a = row_of[m], az_pos[m]
+        for d in range(nd):
+            for i in range(n):
+                buf[q, i, d, a] = src[d, r0 + i]
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"contract"})
+def prepare_chirps(adc: Any, coupling: Any, gain: Any, chirp_weight: Any, dc_removal: bool,
+                   out: Any) -> None:  # pragma: no cover - compiled
+    """``out[t, r, c, :ns] = (adc − coupling − mean_n(adc − coupling)) · gain[t, r] · w[c]``.
+
+    One pass over the ADC frame (plus one for the mean) instead of four numpy passes; the
+    samples beyond ``ns`` (zero padding) are left as they are (zeros).
+    ``coupling`` is ``(tx, rx, ns)`` or empty (no coupling); ``gain`` ``(tx, rx, ns)``
+    (calibration × range window); ``chirp_weight`` ``(chirps,)`` (Doppler window × (−1)^c).
+    """
+    ntx, nrx, nc, ns = adc.shape
+    has_c = coupling.size > 0
+    for t in range(ntx):
+        for r in range(nrx):
+            g = gain[t, r]
+            for c in range(nc):
+                x = adc[t, r, c]
+                y = out[t, r, c]
+                mr = 0.0
+                mi = 0.0
+                if dc_removal:
+                    for n in range(ns):
+                        v = x[n] - coupling[t, r, n] if has_c else x[n]
+                        mr += v.real
+                        mi += v.imag
+                    mr /= ns
+                    mi /= ns
+                mean = np.complex64(complex(mr, mi))
+                w = chirp_weight[c]
+                for n in range(ns):
+                    v = x[n] - coupling[t, r, n] if has_c else x[n]
+                    y[n] = np.complex64((v - mean) * g[n]) * w

@@ -42,7 +42,7 @@ import scipy.fft as sfft
 
 from .array import AngleGrid
 
-__all__ = ["CHUNK_SIZE", "ENGINES", "available_engines", "heatmap_from_elements"]
+__all__ = ["CHUNK_SIZE", "ENGINES", "available_engines", "heatmap_from_elements", "resolve_engine"]
 
 CHUNK_SIZE = 1 << 17
 """Azimuth-spectrum values per chunk by default (1 MiB of complex64: stays in a core's L2)."""
@@ -73,7 +73,16 @@ def available_engines() -> tuple[str, ...]:
     return ("numba", "numpy") if _numba_kernel() is not None else ("numpy",)
 
 
-def _resolve(engine: str) -> str:
+def resolve_engine(engine: str) -> str:
+    """``"numba"`` or ``"numpy"`` for an ``engine`` setting (``"auto"``: numba if installed).
+
+    Raises
+    ------
+    ValueError
+        Unknown name.
+    ImportError
+        ``"numba"`` asked for but numba is not installed.
+    """
     if engine not in ENGINES:
         raise ValueError(f"unknown heatmap engine {engine!r}; expected one of {', '.join(ENGINES)}")
     if engine == "auto":
@@ -157,7 +166,7 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
         normalised by ``M²`` (a target of amplitude ``a`` at bin centres gives ``|a|²``),
         channel 1 the range rate of that peak [m/s].
     """
-    engine = _resolve(engine)
+    engine = resolve_engine(engine)
     m, nd, nr = elements.shape
     if m != grid.num_elements or len(velocities) != nd:
         raise ValueError(f"elements {elements.shape} do not fit the grid's {grid.num_elements} "

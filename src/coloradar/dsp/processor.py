@@ -32,7 +32,7 @@ from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
 from .cfar import CFAR_KINDS, cfar, cfar_scale, cfar_window
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import Detections, local_maxima
-from .heatmap import ENGINES, heatmap_from_elements
+from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import tdm_phase
 from .windows import WINDOWS, coherent_window
 
@@ -85,10 +85,12 @@ class ProcessingSettings:
         Threads per scipy.fft call. The default 1 is fastest for one frame on few cores (the
         heatmap's FFTs come in cache-sized chunks too small to split); parallelism across
         frames belongs to the batch layer (one process per core).
-    heatmap_engine
-        ``"auto"`` (numba when installed, else numpy), ``"numba"`` or ``"numpy"``: how the
-        heatmap's elevation transform, power and Doppler maximum run
-        (:mod:`coloradar.dsp.heatmap`); the results agree to float32 rounding.
+    engine
+        ``"auto"`` (numba when installed, else numpy), ``"numba"`` or ``"numpy"``: whether
+        the heatmap's elevation transform, power and Doppler maximum, and the range stage's
+        coupling/DC/calibration/window pass, run as compiled kernels
+        (:mod:`coloradar.dsp.heatmap`, ``pip install coloradar[accel]``); the results agree
+        to float32 rounding.
     """
 
     range_window: str = "hann"
@@ -115,14 +117,14 @@ class ProcessingSettings:
     angle_oversample: int = 2
     capon_loading: float = 0.05
     workers: int = 1
-    heatmap_engine: str = "auto"
+    engine: str = "auto"
 
     def __post_init__(self) -> None:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
                    "coupling_domain": ("raw", "calibrated"), "overlap": OVERLAP_MODES,
                    "cfar_kind": CFAR_KINDS, "angle_method": ("fft", "capon"),
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1),
-                   "heatmap_engine": ENGINES}
+                   "engine": ENGINES}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise ValueError(f"{name} = {getattr(self, name)!r}; expected one of "
@@ -226,6 +228,10 @@ class RadarProcessor:
             wd = wd * np.where(np.arange(nc) % 2 == 0, 1.0, -1.0)
         self._mult = (cal[:, :, None, :] * coherent_window(s.range_window, ns)
                       * wd[None, None, :, None]).astype(np.complex64)
+        # The same factors for the compiled range pass: per channel × per chirp.
+        self._gain = (cal * coherent_window(s.range_window, ns)).astype(np.complex64)
+        self._chirp_weight = wd.astype(np.float32)
+        self._engine = resolve_engine(s.engine)
         self._coupling = None
         if s.coupling_subtraction and calib.coupling is not None:
             c = coupling_signal(calib.coupling, ns)
@@ -265,6 +271,8 @@ class RadarProcessor:
         """Calibrated range FFT ``(tx, rx, chirp, range)``; chirps carry the Doppler window and
         the ``(−1)^c`` of the Doppler shift."""
         x = self._check(adc)
+        if self._engine == "numba":
+            return self._range_cube_compiled(x)
         y = x - self._coupling if self._coupling is not None else x.astype(np.complex64)
         if y.dtype != np.complex64:
             y = y.astype(np.complex64)
@@ -273,6 +281,21 @@ class RadarProcessor:
         y *= self._mult
         out = sfft.fft(y, n=self.range_fft_size, axis=-1, workers=self.settings.workers,
                        overwrite_x=True)
+        return out[..., : self.num_range_bins]
+
+    def _range_cube_compiled(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`_range_cube` with coupling, DC removal, calibration and windows in one
+        compiled pass (same result to float32 rounding)."""
+        from ._kernels import prepare_chirps
+        nfft = self.range_fft_size
+        y = np.empty((*x.shape[:-1], nfft), dtype=np.complex64)
+        if nfft > x.shape[-1]:
+            y[..., x.shape[-1]:] = 0.0
+        coupling = (self._coupling[:, :, 0, :] if self._coupling is not None
+                    else np.empty((0, 0, 0), dtype=np.complex64))
+        prepare_chirps(x, coupling, self._gain, self._chirp_weight,
+                       bool(self.settings.dc_removal), y)
+        out = sfft.fft(y, axis=-1, workers=self.settings.workers, overwrite_x=True)
         return out[..., : self.num_range_bins]
 
     def _doppler(self, rcube: np.ndarray) -> np.ndarray:
@@ -321,7 +344,7 @@ class RadarProcessor:
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
                                      workers=self.settings.workers,
-                                     engine=self.settings.heatmap_engine)
+                                     engine=self._engine)
 
     def heatmap_config(self) -> HeatmapConfig:
         """The grid of :meth:`heatmap` with the true angles of its bins (for heatmap_cfg.txt).
