@@ -139,7 +139,8 @@ def _paired_steering(grid: AngleGrid) -> tuple[np.ndarray, np.ndarray, int, np.n
 
 def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.ndarray,
                           workers: int = 1, chunk_size: int = CHUNK_SIZE,
-                          engine: str = "auto") -> np.ndarray:
+                          engine: str = "auto", channels: np.ndarray | None = None
+                          ) -> np.ndarray:
     """Heatmap from the per-element range–Doppler cube.
 
     Parameters
@@ -158,6 +159,10 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
     engine
         ``"auto"``, ``"numba"`` or ``"numpy"`` (see the module notes); all give the same
         result to float32 rounding.
+    channels
+        int ``(M,)`` or None. When given, ``elements`` is a ``(C, doppler, range)`` cube of
+        channels and element ``m`` is ``elements[channels[m]]`` (saves copying the elements
+        out of a range–Doppler cube).
 
     Returns
     -------
@@ -167,7 +172,11 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
         channel 1 the range rate of that peak [m/s].
     """
     engine = resolve_engine(engine)
-    m, nd, nr = elements.shape
+    if channels is not None and engine == "numpy":
+        elements, channels = elements[channels], None
+    chan = (np.arange(elements.shape[0]) if channels is None
+            else np.asarray(channels)).astype(np.int64)
+    m, (_, nd, nr) = chan.size, elements.shape
     if m != grid.num_elements or len(velocities) != nd:
         raise ValueError(f"elements {elements.shape} do not fit the grid's {grid.num_elements} "
                          f"elements and {len(velocities)} Doppler bins")
@@ -180,15 +189,19 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
     if engine == "numba":
         kernel = _numba_kernel()
         assert kernel is not None
+        from ._kernels import gather_rows
         rows, steer, n_even, el_plus, el_minus = _paired_steering(grid)
         row_of = np.argsort(rows)[np.searchsorted(np.sort(rows), grid.el_pos)]
         rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
         buf = np.zeros((n_rows, rc, nd, width), dtype=np.complex64)
         az_read = grid.az_read.astype(np.int64)
+        az_pos = grid.az_pos.astype(np.int64)
+        row_of = row_of.astype(np.int64)
+        elements = np.ascontiguousarray(elements, dtype=np.complex64)
         for r0 in range(0, nr, rc):
             n = min(nr, r0 + rc) - r0
             b = buf[:, :n]
-            b[row_of, :, :, grid.az_pos] = elements[:, :, r0:r0 + n].transpose(0, 2, 1)
+            gather_rows(elements, chan, row_of, az_pos, r0, b)
             spec = sfft.fft(b, n=n_az, axis=3, workers=workers)        # (rows, n, nd, n_az)
             kernel(spec, steer, n_even, el_plus, el_minus, az_read, vel, float(scale), out, r0)
         return out

@@ -287,14 +287,15 @@ class RadarProcessor:
         """:meth:`_range_cube` with coupling, DC removal, calibration and windows in one
         compiled pass (same result to float32 rounding)."""
         from ._kernels import prepare_chirps
-        nfft = self.range_fft_size
+        nfft, ns = self.range_fft_size, x.shape[-1]
+        x = np.ascontiguousarray(x, dtype=np.complex64)
         y = np.empty((*x.shape[:-1], nfft), dtype=np.complex64)
-        if nfft > x.shape[-1]:
-            y[..., x.shape[-1]:] = 0.0
-        coupling = (self._coupling[:, :, 0, :] if self._coupling is not None
-                    else np.empty((0, 0, 0), dtype=np.complex64))
-        prepare_chirps(x, coupling, self._gain, self._chirp_weight,
-                       bool(self.settings.dc_removal), y)
+        if nfft > ns:
+            y[..., ns:] = 0.0
+        coupling = (np.ascontiguousarray(self._coupling[:, :, 0, :]).view(np.float32)
+                    if self._coupling is not None else np.empty((0, 0, 0), dtype=np.float32))
+        prepare_chirps(x.view(np.float32), coupling, self._gain.view(np.float32),
+                       self._chirp_weight, bool(self.settings.dc_removal), y.view(np.float32))
         out = sfft.fft(y, axis=-1, workers=self.settings.workers, overwrite_x=True)
         return out[..., : self.num_range_bins]
 
@@ -341,10 +342,17 @@ class RadarProcessor:
         return self._heatmap(self.range_doppler(adc))
 
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
+        if self.settings.overlap == "first":
+            # the engine reads each element's channel straight from the cube
+            ntx, nrx = rd.shape[:2]
+            first = self.calib.antenna.virtual.first_pair
+            return heatmap_from_elements(rd.reshape(ntx * nrx, *rd.shape[2:]), self.grid,
+                                         self.velocities, workers=self.settings.workers,
+                                         engine=self._engine,
+                                         channels=first[:, 0] * nrx + first[:, 1])
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
-                                     workers=self.settings.workers,
-                                     engine=self._engine)
+                                     workers=self.settings.workers, engine=self._engine)
 
     def heatmap_config(self) -> HeatmapConfig:
         """The grid of :meth:`heatmap` with the true angles of its bins (for heatmap_cfg.txt).
