@@ -22,7 +22,6 @@ from coloradar.viz import (
     animate_run,
     ffmpeg_path,
     gather_scene,
-    heatmap_points,
     plot_heatmap_slice,
     plot_range_azimuth,
     plot_range_doppler,
@@ -132,17 +131,33 @@ def test_heatmap_slices_find_the_target(tmp_path, view):
     assert _png_size(save_figure(fig, tmp_path / "hm.png")) == (1300, 550)
 
 
-def test_heatmap_points_are_the_strong_cells_in_radar_coordinates():
-    cfg = preset_calibration().cascade.heatmap
+def test_heatmap_cells_are_placed_by_direction_sines():
+    """Viewers, odometry and heatmap_pointcloud share one placement: an FFT grid measures
+    direction sines, azimuth bins are asin(u_y) and elevation bins asin(u_z) (docs/dsp.md), so
+    a cell is at R·(√(1 − u_y² − u_z²), u_y, u_z), R = r·range_bin_width."""
+    from types import SimpleNamespace
+
+    from coloradar.dsp import FramePoints
+    from coloradar.viz.scene import radar_points
+
+    calib = preset_calibration()
+    cfg = calib.cascade.heatmap
     e, a, r = 20, 90, 60
     hm = _heatmap_with_target(cfg, e, a, r, 0.5)
-    pts = heatmap_points(hm, cfg, max_points=5, dynamic_range=10)
+    uy, uz = np.sin(cfg.azimuth_bins[a]), np.sin(cfg.elevation_bins[e])
+    rng = r * cfg.range_bin_width
+    expect = rng * np.array([np.sqrt(1.0 - uy**2 - uz**2), uy, uz])
+    seq = SimpleNamespace(calib=calib)
+    pts = radar_points(seq, "cascade", "cascade/heatmaps", hm, max_points=5)      # the scene's
     assert pts.shape == (1, 5)
-    rng, az, el = cfg.range_bins[r], cfg.azimuth_bins[a], cfg.elevation_bins[e]
-    # DESIGN.md §3: (R cos el cos az, R cos el sin az, R sin el), azimuth positive toward +y.
-    expect = rng * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
     np.testing.assert_allclose(pts[0, :3], expect, atol=1e-5)
-    assert pts[0, 4] == 0.5
+    assert pts[0, 3] == 1e4 and pts[0, 4] == 0.5
+    same = FramePoints(calib.cascade, "heatmaps")(hm)                            # odometry's
+    np.testing.assert_array_equal(same, pts)
+    # Reading the bin angles as spherical azimuth/elevation would put it centimetres away.
+    el, az = cfg.elevation_bins[e], cfg.azimuth_bins[a]
+    spherical = rng * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    assert np.linalg.norm(spherical - expect) > 0.03
 
 
 # -- a run on disk: scene and animation --------------------------------------------------------
@@ -261,6 +276,38 @@ def test_animation_mp4(run, tmp_path):
     out = animate_run(run, tmp_path / "run.mp4", duration=0.4, fps=5, dpi=40, frame="cascade")
     data = out.read_bytes()
     assert data[4:8] == b"ftyp" and len(data) > 1000
+
+
+def test_scene_shows_the_radar_asked_for(run, tmp_path):
+    """``plot --view scene --radar R``: R's points alone, ``--frame`` counting R's frames."""
+    import shutil
+
+    from coloradar.cli.main import main
+    from coloradar.viz import frame_figure
+
+    folder = tmp_path / Path(run.location).name
+    shutil.copytree(run.location, folder)
+    shutil.copytree(Path(run.location).parent / "calib", tmp_path / "calib")
+    # A cascade point stream too: one point 5 m ahead of the cascade, at other times.
+    ts = T0 + 0.07 + np.arange(10) / 5.0
+    fm.write_timestamps(folder / "cascade/pointclouds/timestamps.txt", ts)
+    for i in range(ts.size):
+        fm.write_radar_pointcloud(folder / f"cascade/pointclouds/data/radar_pointcloud_{i}.bin",
+                                  np.array([[5.0, 0.0, 0.0, 10.0, 0.1]], np.float32))
+    seq = open_sequence(folder)
+    both = frame_figure(seq, "scene", 3)
+    labels = {c.get_label() for c in both.axes[0].collections}
+    assert {"cascade radar", "single_chip radar"} <= labels
+    for radar, other, stream in (("single_chip", "cascade", "single_chip/pointclouds"),
+                                 ("cascade", "single_chip", "cascade/pointclouds")):
+        fig = frame_figure(seq, "scene", 3, radar=radar)
+        labels = {c.get_label() for c in fig.axes[0].collections}
+        assert f"{radar} radar" in labels and f"{other} radar" not in labels
+        assert f"{stream} frame 3" in fig.axes[0].get_title()
+    out = tmp_path / "sc.png"
+    assert main(["plot", str(folder), "--view", "scene", "--radar", "single_chip", "--frame",
+                 "2", "--out", str(out)]) == 0
+    assert _png_size(out) == (800, 750)
 
 
 def test_plot_and_animate_commands(run, tmp_path, capsys):

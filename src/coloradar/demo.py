@@ -163,6 +163,7 @@ def _process_radar(seq, truth, radar: str, out: Path, show_progress: bool
     """Heatmaps and point clouds of every frame of one radar (``coloradar process``'s library
     function, writing under ``out/<radar>/``), compared with the truth. Returns the result and
     the data for the pictures."""
+    from .batch.layout import frame_file
     from .batch.run_processing import output_paths, process_run
     from .calib import parse_heatmap_cfg
     from .formats import read_heatmap, read_radar_pointcloud
@@ -175,12 +176,11 @@ def _process_radar(seq, truth, radar: str, out: Path, show_progress: bool
     seconds = time.perf_counter() - t0
     stream = seq.radar(radar).adc
     n = len(stream)
-    pc_dir = output_paths(out, radar, "pointclouds")[1]
-    hm_folder, hm_dir = output_paths(out, radar, "heatmaps")
+    hm_folder = output_paths(out, radar, "heatmaps")[0]
     acc: dict = {}
     onboard: dict = {}
     for i, fid in enumerate(np.asarray(stream.frame_ids)):
-        pts = read_radar_pointcloud(pc_dir / f"radar_pointcloud_{fid}.bin")
+        pts = read_radar_pointcloud(frame_file(out, radar, "pointclouds", fid))
         tg = truth.targets(radar, i)
         kw = dict(radius=MATCH_RADIUS, rate_tolerance=w.velocity_bin_width,
                   max_velocity=w.max_velocity)
@@ -191,9 +191,9 @@ def _process_radar(seq, truth, radar: str, out: Path, show_progress: bool
     mid = n // 2
     fid = int(stream.frame_ids[mid])
     cfg = parse_heatmap_cfg((hm_folder / "heatmap_cfg.txt").read_text(), "heatmap_cfg.txt")
-    picture = {"heatmap": read_heatmap(hm_dir / f"heatmap_{fid}.bin", cfg.shape),
-               "config": cfg, "points": read_radar_pointcloud(pc_dir /
-                                                             f"radar_pointcloud_{fid}.bin"),
+    picture = {"heatmap": read_heatmap(frame_file(out, radar, "heatmaps", fid), cfg.shape),
+               "config": cfg,
+               "points": read_radar_pointcloud(frame_file(out, radar, "pointclouds", fid)),
                "truth": truth.targets(radar, mid)["position"], "frame": mid}
     s = _finish(acc)
     res = RadarResult(radar, n, seconds, int(s["detections"]), int(s["matched"]),

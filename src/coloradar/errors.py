@@ -2,7 +2,9 @@
 
 Every error a user can provoke with bad input derives from :class:`ColoradarError`, so that
 ``except coloradar.ColoradarError`` catches all of them; each message names the file and what was
-expected.
+expected. Each class also derives from the built-in exception a caller would have caught before
+(``ValueError``, ``KeyError``, ``IndexError``, ``OSError``, ``ImportError``), so that code written
+against those keeps working.
 """
 
 from __future__ import annotations
@@ -33,6 +35,29 @@ class ExtrapolationError(ColoradarError, ValueError):
 
 class OutputExistsError(ColoradarError, FileExistsError):
     """An output would overwrite existing files and overwriting was not requested."""
+
+
+class SettingsError(ColoradarError, ValueError):
+    """A setting or argument has a value outside what it accepts (an unknown mode, a
+    non-positive size, a probability outside (0, 1), a frame index past the end...)."""
+
+
+class FrameIndexError(ColoradarError, IndexError):
+    """A frame (or bin) index lies outside the stream (or axis) it indexes."""
+
+
+class ReadError(ColoradarError, OSError):
+    """An input exists but cannot be read: not a regular file (a FIFO, a device, a folder
+    where a file was expected) or no permission."""
+
+
+class WriteError(ColoradarError, OSError):
+    """An output cannot be written: its folder is a file, no permission, the disk is full..."""
+
+
+class MissingDependencyError(ColoradarError, ImportError):
+    """An optional extra (``pip install 'coloradar[viz]'``, ``[dask]``, ``[rerun]``...) that
+    the call needs is not installed."""
 
 
 class CalibrationWarning(UserWarning):

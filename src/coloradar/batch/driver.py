@@ -33,15 +33,17 @@ from ..calib import RADARS, Calibration, format_heatmap_cfg
 from ..dataset import FrameStream, find_runs, open_sequence
 from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..errors import ColoradarError, DataWarning, MissingDataError, OutputExistsError, WriteError
 from ..formats import heatmap_nbytes
-from ..formats.atomic import write_text_if_changed
+from ..formats.atomic import make_output_dir, write_text_if_changed
+from ..formats.layout import LAYOUTS
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, make_executor
 from .layout import (
     PRODUCTS,
     clean_partial_files,
+    frame_file,
     output_paths,
     product_has_output,
     remove_product_output,
@@ -51,9 +53,11 @@ from .layout import (
 from .manifest import (
     OutputLock,
     calibration_fingerprint,
+    input_versions,
     read_manifest,
     settings_differences,
     settings_record,
+    stale_frames,
     write_manifest,
 )
 from .report import REPORT, BatchReport, RadarOutcome, RunOutcome
@@ -86,6 +90,7 @@ class _RadarJob:
     heatmap_bytes: int
     heatmap_cfg: str
     outcome: RadarOutcome
+    inputs: dict[str, str] = field(default_factory=dict)
     todo: list[int] = field(default_factory=list)
     chunks_left: int = 0
     unsure: list[tuple[int, TaskError]] = field(default_factory=list)
@@ -113,12 +118,20 @@ def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-_RUN_PARTS = ("cascade/adc_samples", "single_chip/adc_samples", "lidar", "imu", "groundtruth",
-              "vicon")
+# Folders of a run that ``process`` never writes: an output folder holding one is a run.
+_RUN_PARTS = tuple(dict.fromkeys(
+    m for lay in LAYOUTS.values() for m in lay.run_markers
+    if not any(m == s.folder for s in lay.frames.values()
+               if s.sensor in lay.radars and s.product in PRODUCTS)))
 
 
 def _check_target(t: RunTarget) -> None:
     run, out = t.path.resolve(), t.out.resolve()
+    probe = out  # the output folder, or the nearest of its parents that exists
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise WriteError(f"{t.out}: expected an output folder, but {probe} is a file")
     if _inside(out, run):
         raise ColoradarError(f"{t.out}: the output folder lies inside the run {t.path}; choose "
                              "an output folder outside it (coloradar never writes into a run)")
@@ -170,7 +183,7 @@ def _plan_run(t: RunTarget, calib: CalibLike, radars, frames: slice | None,
         job.radars.append(_RadarJob(
             radar, stream, calibration_fingerprint(rc), rec, positions,
             heatmap_nbytes(hcfg.shape), format_heatmap_cfg(hcfg),
-            RadarOutcome(frames=len(positions))))
+            RadarOutcome(frames=len(positions)), input_versions(stream)))
         job.outcome.radars[radar] = job.radars[-1].outcome
     return job
 
@@ -208,7 +221,7 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
     """Under the lock: clear what ``overwrite`` replaces, remove partial files, record the
     settings, and find the frames still to do."""
     out = job.target.out
-    out.mkdir(parents=True, exist_ok=True)
+    make_output_dir(out)
     try:
         manifest = read_manifest(out)
     except OutputExistsError:
@@ -234,13 +247,37 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
             entries[f"{rj.radar}/{p}"] = {"settings": rj.settings_rec,
                                           "calibration_sha256": rj.calib_key}
     clean_partial_files(folders)
-    write_manifest(out, job.name, entries)
+    inputs = dict((manifest or {}).get("inputs") or {})  # radars not processed now stay
+    for rj in job.radars:
+        if not overwrite:
+            _remove_stale(manifest, out, rj)
+        inputs[rj.radar] = rj.inputs
+    write_manifest(out, job.name, entries, inputs)
     for rj in job.radars:
         complete = set.intersection(*(valid_frames(out, rj.radar, p, rj.heatmap_bytes)
                                       for p in prods))
         ids = rj.stream.frame_ids
         rj.todo = [k for k in rj.positions if int(ids[k]) not in complete]
         rj.outcome.skipped = len(rj.positions) - len(rj.todo)
+
+
+def _remove_stale(manifest: dict | None, out: Path, rj: _RadarJob) -> None:
+    """Delete the product files of frames whose input was rewritten since they were made (a
+    re-simulated run, a repaired file): they are stale, and ours (the manifest records them),
+    so they are redone rather than resumed. Every product the manifest records is cleared,
+    requested now or not, so that none is later taken as made from the new input."""
+    recorded = (manifest or {}).get("products") or {}
+    prods = [p for p in PRODUCTS if f"{rj.radar}/{p}" in recorded]
+    have = set().union(*(valid_frames(out, rj.radar, p, rj.heatmap_bytes) for p in prods))
+    stale = stale_frames(manifest, rj.radar, rj.inputs, have)
+    if not stale:
+        return
+    for i in stale:
+        for p in prods:
+            frame_file(out, rj.radar, p, i).unlink(missing_ok=True)
+    warnings.warn(f"{out / rj.radar}: the ADC files of {len(stale)} frame(s) changed since their "
+                  f"output was made (first: frame {stale[0]}); processing them again",
+                  DataWarning, stacklevel=4)
 
 
 def _finish_radar(job: _RunJob, rj: _RadarJob, prods: tuple[str, ...]) -> None:

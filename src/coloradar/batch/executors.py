@@ -32,7 +32,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import CalibrationWarning, ColoradarError, DataWarning
+from ..errors import CalibrationWarning, ColoradarError, DataWarning, MissingDependencyError, SettingsError
 
 __all__ = ["DaskExecutor", "Executor", "LocalExecutor", "SerialExecutor", "TaskError",
            "make_executor"]
@@ -62,7 +62,7 @@ class TaskError:
 
 def _check_errors(errors: str) -> None:
     if errors not in _ERRORS:
-        raise ValueError(f"errors must be one of {_ERRORS}, got {errors!r}")
+        raise SettingsError(f"errors must be one of {_ERRORS}, got {errors!r}")
 
 
 class Executor:
@@ -272,8 +272,8 @@ class DaskExecutor(Executor):
         try:
             from distributed import Client
         except ImportError:
-            raise ColoradarError("running on a Dask cluster needs the dask extra: "
-                                 "pip install 'coloradar[dask]'") from None
+            raise MissingDependencyError("running on a Dask cluster needs the dask extra: "
+                                         "pip install 'coloradar[dask]'") from None
         self._own = client is None
         if client is None:
             if address is None and scheduler_file is None:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..formats.layout import COLORADAR, PROCESS_PRODUCTS
 from ..formats.text import format_timestamps
 
 __all__ = [
@@ -36,10 +37,12 @@ __all__ = [
     "valid_frames",
 ]
 
-PRODUCTS = ("heatmaps", "pointclouds")
+PRODUCTS = PROCESS_PRODUCTS
 """Products ``coloradar process`` can write."""
 
-PREFIX = {"heatmaps": "heatmap", "pointclouds": "radar_pointcloud"}
+# Output is laid out as a ColoRadar run (coloradar.formats.layout.COLORADAR), so that
+# ``open_sequence`` reads it back; both radars name their product files alike.
+PREFIX = {p: COLORADAR.frame(f"cascade/{p}").prefix for p in PRODUCTS}
 POINT_BYTES = 5 * 4
 _FRAME_RE = re.compile(r"^(?P<prefix>[a-z_]+)_(?P<num>\d+)\.bin$")
 # atomic_write_bytes's temporary names: ".<final name>.<random>.tmp"
@@ -48,13 +51,13 @@ _PARTIAL_RE = re.compile(r"^\..+\.tmp$")
 
 def output_paths(out: str | os.PathLike, radar: str, product: str) -> tuple[Path, Path]:
     """``(product folder, data folder)`` of one radar's product under ``out``."""
-    folder = Path(out) / radar / product
-    return folder, folder / "data"
+    st = COLORADAR.frame(f"{radar}/{product}")
+    return Path(out) / st.folder, Path(out) / st.data
 
 
 def frame_file(out: str | os.PathLike, radar: str, product: str, frame_id: int) -> Path:
     """The file of frame number ``frame_id`` of a product (named like the dataset's own)."""
-    return output_paths(out, radar, product)[1] / f"{PREFIX[product]}_{int(frame_id)}.bin"
+    return Path(out) / COLORADAR.frame(f"{radar}/{product}").frame_path(frame_id)
 
 
 def is_valid_size(product: str, size: int, heatmap_bytes: int) -> bool:
@@ -141,7 +144,7 @@ def timestamps_text(frame_ids: np.ndarray, timestamps: np.ndarray, written: np.n
     """Timestamps file for the frames ``written`` of a stream with these frames.
 
     Readers pair line ``j`` with frame ``base + j``, ``base`` being 1 when the first file is
-    number 1 and 0 otherwise (DESIGN.md §1), so the lines run from that base to the last
+    number 1 and 0 otherwise (``docs/layout.md``), so the lines run from that base to the last
     written frame; frames without an ADC timestamp read ``nan``.
 
     Parameters

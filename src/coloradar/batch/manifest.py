@@ -3,7 +3,11 @@
 ``<out>/process_manifest.json`` records, per radar and product, the processing settings and a
 fingerprint of the radar calibration the frames there were computed with. A rerun with the
 same settings resumes (complete frames are kept); a rerun with different ones is refused
-unless ``overwrite`` — frames computed two ways never mix silently in one folder. An output
+unless ``overwrite`` — frames computed two ways never mix silently in one folder. The manifest
+also records, for each radar, a version of every input frame file (size and modification
+time): a frame whose input was rewritten since its output was made (a re-simulated run, a
+repaired file) is stale, and a rerun processes it again instead of counting it complete. An
+output
 folder without a manifest that already holds products (written by something else) is refused
 likewise.
 
@@ -30,9 +34,11 @@ from ..calib import (
     format_phase_frequency_calib,
     format_waveform_cfg,
 )
+from ..dataset import FrameStream
 from ..dsp import ProcessingSettings
-from ..errors import OutputExistsError
-from ..formats.atomic import write_text_if_changed
+from ..errors import FormatError, OutputExistsError, WriteError
+from ..formats.atomic import make_output_dir, write_text_if_changed
+from ..formats.source import read_file_text
 
 try:  # POSIX; elsewhere jobs are not guarded against each other
     import fcntl
@@ -43,9 +49,11 @@ __all__ = [
     "MANIFEST",
     "OutputLock",
     "calibration_fingerprint",
+    "input_versions",
     "read_manifest",
     "settings_differences",
     "settings_record",
+    "stale_frames",
     "write_manifest",
 ]
 
@@ -69,6 +77,25 @@ def calibration_fingerprint(calib: RadarCalib) -> str:
         h.update(p.encode())
         h.update(b"\0")
     return h.hexdigest()
+
+
+def input_versions(stream: FrameStream) -> dict[str, str]:
+    """Frame number (as text, a JSON key) to the version of its ADC file
+    (:meth:`~coloradar.dataset.FrameStream.versions`), for every frame of ``stream`` whatever
+    ``--frames`` selects; what the manifest records under ``inputs/<radar>``."""
+    return {str(int(i)): v for i, v in zip(stream.frame_ids, stream.versions(), strict=True)}
+
+
+def stale_frames(manifest: dict[str, Any] | None, radar: str, current: dict[str, str],
+                 have_output: set[int]) -> list[int]:
+    """Frame numbers among ``have_output`` whose input differs from the one recorded when their
+    output was made: a changed version, or a frame the record does not know. A manifest without
+    a record for ``radar`` (written before inputs were recorded) vouches for every frame."""
+    stored = ((manifest or {}).get("inputs") or {}).get(radar)
+    if not isinstance(stored, dict):
+        return []
+    return sorted(i for i in have_output
+                  if str(i) in current and stored.get(str(i)) != current[str(i)])
 
 
 def settings_record(settings: ProcessingSettings | None) -> dict[str, Any]:
@@ -100,10 +127,13 @@ def read_manifest(out: Path) -> dict[str, Any] | None:
         When the file is there but unreadable (it cannot vouch for the files beside it).
     """
     path = out / MANIFEST
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not path.exists():
         return None
+    try:
+        text = read_file_text(path)
+    except FormatError as exc:  # not UTF-8
+        raise OutputExistsError(f"{exc}; pass overwrite=True (--overwrite) to replace this "
+                                "output") from None
     try:
         data = json.loads(text)
         if data.get("format") != FORMAT or not isinstance(data.get("products"), dict):
@@ -114,11 +144,16 @@ def read_manifest(out: Path) -> dict[str, Any] | None:
     return data
 
 
-def write_manifest(out: Path, run: str, entries: dict[str, dict[str, Any]]) -> None:
+def write_manifest(out: Path, run: str, entries: dict[str, dict[str, Any]],
+                   inputs: dict[str, dict[str, str]] | None = None) -> None:
     """Write (atomically, only when its content changes) the manifest with ``entries``:
-    ``"<radar>/<product>" -> {"settings": ..., "calibration_sha256": ...}``."""
-    text = json.dumps({"format": FORMAT, "run": run, "coloradar_version": __version__,
-                       "products": dict(sorted(entries.items()))}, indent=1) + "\n"
+    ``"<radar>/<product>" -> {"settings": ..., "calibration_sha256": ...}``, and ``inputs``:
+    ``"<radar>" -> {frame number: version of its input file}`` (:func:`input_versions`)."""
+    record: dict[str, Any] = {"format": FORMAT, "run": run, "coloradar_version": __version__,
+                              "products": dict(sorted(entries.items()))}
+    if inputs:
+        record["inputs"] = dict(sorted(inputs.items()))
+    text = json.dumps(record, indent=1) + "\n"
     write_text_if_changed(out / MANIFEST, text)
 
 
@@ -138,9 +173,13 @@ class OutputLock:
     def __enter__(self) -> OutputLock:
         if fcntl is None:  # pragma: no cover
             return self
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        make_output_dir(self.path.parent)
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise WriteError(f"{self.path}: cannot create the output lock "
+                                 f"({exc.strerror or exc})") from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:

@@ -175,9 +175,9 @@ class BatchReport:
                 parts.append(txt + (f" ({', '.join(extra)})" if extra else ""))
             lines.append(f"{name}: " + "; ".join(parts) + f" -> {run.out}")
         fails = self.failures()
-        for run, radar, f in fails[:max_failures]:
+        for run_name, radar, f in fails[:max_failures]:
             msg = f.message.removeprefix(f"{f.file}: ")
-            lines.append(f"  failed: {run} {radar} frame {f.frame_id} ({f.file}): "
+            lines.append(f"  failed: {run_name} {radar} frame {f.frame_id} ({f.file}): "
                          f"{f.error}: {msg}")
         if len(fails) > max_failures:
             lines.append(f"  … and {len(fails) - max_failures} more failures (see the report)")

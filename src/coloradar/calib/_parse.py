@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._arrays import readonly  # noqa: F401  (re-exported for the calib modules)
@@ -46,6 +48,9 @@ def get_number(kv: dict[str, list[str]], key: str, name: str, kind: type = float
         v = float(vals[0])
     except ValueError:
         raise CalibrationError(f"{name}: key {key!r} should be a number, got {vals[0]!r}") from None
+    if not math.isfinite(v):
+        # NaN passes every comparison check downstream and turns into NaN heatmaps.
+        raise CalibrationError(f"{name}: key {key!r} should be a finite number, got {vals[0]!r}")
     if kind is int:
         if v != int(v):
             raise CalibrationError(f"{name}: key {key!r} should be an integer, got {vals[0]!r}")
@@ -57,6 +62,16 @@ def get_floats(kv: dict[str, list[str]], key: str, name: str) -> np.ndarray:
     if key not in kv:
         raise CalibrationError(f"{name}: missing key {key!r}")
     try:
-        return np.array([float(v) for v in kv[key]], dtype=np.float64)
+        values = np.array([float(v) for v in kv[key]], dtype=np.float64)
     except ValueError:
         raise CalibrationError(f"{name}: key {key!r} should be a list of numbers") from None
+    check_finite(values, name, key)
+    return values
+
+
+def check_finite(values: np.ndarray, name: str, what: str) -> None:
+    """Refuse NaN or infinite entries of ``values`` (read from file ``name``, as ``what``)."""
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        raise CalibrationError(f"{name}: {what} should hold finite numbers; entry {int(bad[0])} "
+                               f"is {values.ravel()[bad[0]]!r} ({bad.size} such entries)")

@@ -13,6 +13,7 @@ virtual array, azimuth along →, elevation ↑ (each ``o`` one unique virtual e
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -116,6 +117,10 @@ def _virtual_array(tx: np.ndarray, rx: np.ndarray) -> VirtualArray:
     )
 
 
+_MAX_POSITION = 1000.0
+"""Largest antenna coordinate accepted [half wavelengths] (about 2 m at 77 GHz)."""
+
+
 def parse_antenna_cfg(text: str, name: str = "antenna_cfg.txt") -> AntennaConfig:
     """Parse ``antenna_cfg.txt``: ``num_rx``, ``num_tx``, ``F_design`` [GHz], ``rx|tx idx az el``.
 
@@ -150,6 +155,9 @@ def parse_antenna_cfg(text: str, name: str = "antenna_cfg.txt") -> AntennaConfig
             raise CalibrationError(f"{name}, line {lineno}: expected numbers in {line[:60]!r}") from None
     if f_design is None:
         raise CalibrationError(f"{name}: missing F_design")
+    if not (math.isfinite(f_design) and 1e9 <= f_design <= 1e12):
+        raise CalibrationError(f"{name}: F_design = {f_design / 1e9!r} GHz is not physically "
+                               "sensible; expected a finite value in [1, 1000] GHz")
     arrays = {}
     for kind in ("rx", "tx"):
         n = counts.get(f"num_{kind}")
@@ -159,6 +167,14 @@ def parse_antenna_cfg(text: str, name: str = "antenna_cfg.txt") -> AntennaConfig
             raise CalibrationError(f"{name}: expected {kind} indices 0..{n - 1}, "
                                    f"found {sorted(ants[kind])}")
         arrays[kind] = np.array([ants[kind][i] for i in range(n)], dtype=np.float64)
+        # A NaN position gives NaN steering vectors and NaN points downstream; an antenna
+        # thousands of half wavelengths away (metres at 77 GHz) is no radar board.
+        bad = [i for i in range(n) if not all(math.isfinite(v) and abs(v) <= _MAX_POSITION
+                                              for v in ants[kind][i])]
+        if bad:
+            az, el = ants[kind][bad[0]]
+            raise CalibrationError(f"{name}: {kind} {bad[0]} at az {az!r}, el {el!r}; expected "
+                                   f"finite positions within ±{_MAX_POSITION:g} half wavelengths")
     return AntennaConfig(f_design, arrays["rx"], arrays["tx"])
 
 

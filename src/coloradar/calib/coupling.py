@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CalibrationError, CalibrationWarning
-from ._parse import get_number, key_values, readonly
+from ._parse import check_finite, get_number, key_values, readonly
 
 __all__ = ["CouplingCalib", "format_coupling_calib", "parse_coupling_calib"]
 
@@ -74,6 +74,11 @@ def parse_coupling_calib(text: str, name: str = "coupling_calib.txt") -> Couplin
         vals = np.array(tokens, dtype=np.float64)
     except ValueError:
         raise CalibrationError(f"{name}: 'data:' holds something that is not a number") from None
+    for key, n in (("num_tx", ntx), ("num_rx", nrx), ("num_range_bins", nr),
+                   ("num_doppler_bins", nd)):
+        if not 1 <= n <= 65536:
+            raise CalibrationError(f"{name}: {key} = {n} is outside 1..65536")
+    check_finite(vals, name, "'data:'")
     expected = 2 * ntx * nrx * nr
     if vals.size != expected:
         raise CalibrationError(f"{name}: expected {expected} data values (2 x {ntx} tx x {nrx} rx "

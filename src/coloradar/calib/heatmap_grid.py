@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,11 +44,20 @@ class HeatmapConfig:
             raise CalibrationError(
                 f"heatmap_cfg: {az.size} azimuth and {el.size} elevation angles given for "
                 f"{self.num_azimuth_bins} x {self.num_elevation_bins} bins")
+        for key, a in (("azimuth_bins", az), ("elevation_bins", el)):
+            if not np.all(np.isfinite(a)) or np.any(np.abs(a) > np.pi / 2 + 1e-9):
+                raise CalibrationError(f"heatmap_cfg: {key} must be finite angles within "
+                                       f"±π/2 rad, got values from {a.min()!r} to {a.max()!r}")
         if np.any(np.diff(az) <= 0) or np.any(np.diff(el) <= 0):
             raise CalibrationError("heatmap_cfg: angle lists must be strictly ascending")
-        if self.range_bin_width <= 0 or min(self.num_range_bins, self.num_azimuth_bins,
-                                            self.num_elevation_bins) <= 0:
-            raise CalibrationError("heatmap_cfg: sizes and range_bin_width must be positive")
+        if min(self.num_range_bins, self.num_azimuth_bins, self.num_elevation_bins) <= 0 or max(
+                self.num_range_bins, self.num_azimuth_bins, self.num_elevation_bins) > 65536:
+            raise CalibrationError("heatmap_cfg: sizes must lie in 1..65536, got "
+                                   f"{self.num_range_bins}, {self.num_azimuth_bins}, "
+                                   f"{self.num_elevation_bins}")
+        if not (math.isfinite(self.range_bin_width) and 0 < self.range_bin_width <= 100.0):
+            raise CalibrationError(f"heatmap_cfg: range_bin_width = {self.range_bin_width!r} m "
+                                   "is not physically sensible; expected a value in (0, 100] m")
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -12,12 +12,13 @@ channel, the reflector's (fractional) range bin ``f[t, r]`` (≈ 51) and the com
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CalibrationError
-from ._parse import readonly
+from ._parse import check_finite, readonly
 
 __all__ = ["PhaseFrequencyCalib", "format_phase_frequency_calib", "parse_phase_frequency_calib"]
 
@@ -87,6 +88,12 @@ def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.tx
     if freq.size != ntx * nrx or ph.size != 2 * ntx * nrx:
         raise CalibrationError(f"{name}: expected {ntx * nrx} frequency and {2 * ntx * nrx} phase "
                                f"values for {ntx} tx x {nrx} rx, found {freq.size} and {ph.size}")
+    check_finite(freq, name, "frequencyCalibrationMatrix")
+    check_finite(ph, name, "phaseCalibrationMatrix")
+    for key, v, lo, hi in (("frequencySlope", slope, 1e9, 1e16), ("samplingRate", fs, 1e4, 1e9)):
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise CalibrationError(f"{name}: {key} = {v!r} is not physically sensible; expected "
+                                   f"a finite value in [{lo:g}, {hi:g}]")
     phase = (ph[0::2] + 1j * ph[1::2]).reshape(ntx, nrx)
     return PhaseFrequencyCalib(freq.reshape(ntx, nrx), phase, slope, fs)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import SettingsError
 from .antenna import AntennaConfig
 from .heatmap_grid import HeatmapConfig, shipped_angle_bins
 from .sensor import Calibration, RadarCalib
@@ -40,13 +41,17 @@ _CASCADE_TX = [(0, 0), (4, 0), (8, 0), (9, 1), (10, 4), (11, 6),
 _SINGLE_RX = [(0, 0), (1, 0), (2, 0), (3, 0)]
 _SINGLE_TX = [(0, 0), (4, 0), (2, 1)]
 
+def _extrinsic(translation: list[float], quaternion: list[float]) -> Extrinsic:
+    return Extrinsic(np.array(translation), np.array(quaternion))
+
+
 PRESET_TRANSFORMS: dict[str, Extrinsic] = {
-    "cascade": Extrinsic([0.03, 0.12, -0.09], [0.0, 0.0, 0.706825181105, 0.707388269167]),
-    "single_chip": Extrinsic([-0.145, 0.09, -0.025], [0.0, 0.0, 0.706825181105, 0.707388269167]),
-    "lidar": Extrinsic([-0.075, -0.02, 0.03618], [0.0, 0.0, 0.721382357437, -0.692536998563]),
-    "imu": Extrinsic([0.0, 0.0, 0.0],
-                     [0.707105451466, 0.707108048814, 0.000209535067884, 0.00020953429822]),
-    "vicon": Extrinsic([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
+    "cascade": _extrinsic([0.03, 0.12, -0.09], [0.0, 0.0, 0.706825181105, 0.707388269167]),
+    "single_chip": _extrinsic([-0.145, 0.09, -0.025], [0.0, 0.0, 0.706825181105, 0.707388269167]),
+    "lidar": _extrinsic([-0.075, -0.02, 0.03618], [0.0, 0.0, 0.721382357437, -0.692536998563]),
+    "imu": _extrinsic([0.0, 0.0, 0.0],
+                      [0.707105451466, 0.707108048814, 0.000209535067884, 0.00020953429822]),
+    "vicon": _extrinsic([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
 }
 """``base_T_sensor`` of the real ColoRadar rig (the dataset's ``calib/transforms``)."""
 
@@ -68,7 +73,7 @@ def preset_radar(name: str) -> RadarCalib:
         return RadarCalib("single_chip", w, AntennaConfig(76.8e9, np.array(_SINGLE_RX),
                                                           np.array(_SINGLE_TX)),
                           _grid(64, 16, 64, w.range_bin_width))
-    raise ValueError(f"unknown radar {name!r}")
+    raise SettingsError(f"unknown radar {name!r}")
 
 
 def preset_calibration() -> Calibration:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..errors import CalibrationError, CalibrationWarning, ColoradarError, MissingDataError
 from ..formats.atomic import atomic_write_text
+from ..formats.layout import RunLayout, get_layout
 from ..formats.source import Source, open_source
 from .antenna import AntennaConfig, format_antenna_cfg, parse_antenna_cfg
 from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib
@@ -179,7 +180,8 @@ def _calib_source(path: str | os.PathLike[str]) -> Source:
     return src
 
 
-def load_calibration(path: str | os.PathLike[str] | Source | None = None) -> Calibration:
+def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
+                     layout: str | RunLayout = "coloradar") -> Calibration:
     """Load the rig calibration.
 
     Parameters
@@ -189,6 +191,11 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None) -> Cal
         ``transforms/``), a dataset root holding one of those, or None for the built-in presets.
         A radar or transform missing from the folder falls back to its preset with a
         :class:`CalibrationWarning`.
+    layout
+        The dataset layout the folder belongs to (:mod:`coloradar.formats.layout`): which
+        radars it calibrates (ColoRadar+ has only the cascade; the other radar takes its
+        preset silently) and how its transform files are named (ColoRadar+'s
+        ``base_to_radar.txt`` is the cascade's).
 
     Returns
     -------
@@ -198,6 +205,7 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None) -> Cal
 
     if path is None:
         return presets.preset_calibration()
+    lay = get_layout(layout)
     src = path if isinstance(path, Source) else _calib_source(path)
     radars = {}
     for name in RADARS:
@@ -207,29 +215,35 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None) -> Cal
             except ColoradarError:
                 raise
         else:
-            warnings.warn(f"{src.location}: no {name}/ calibration; using the built-in preset",
-                          CalibrationWarning, stacklevel=2)
+            if name in lay.calib_radars:
+                warnings.warn(f"{src.location}: no {name}/ calibration; using the built-in "
+                              "preset", CalibrationWarning, stacklevel=2)
             radars[name] = presets.preset_radar(name)
     transforms = dict(presets.PRESET_TRANSFORMS)
+    sensor_of = {fname: sensor for sensor, fname in lay.transforms.items()}
     if src.is_dir("transforms"):
         for fname in src.listdir("transforms"):
             if fname.startswith("base_to_") and fname.endswith(".txt"):
                 rel = f"transforms/{fname}"
-                transforms[fname[len("base_to_"):-4]] = parse_transform(src.read_text(rel),
-                                                                         src.describe(rel))
+                sensor = sensor_of.get(fname, fname[len("base_to_"):-4])
+                transforms[sensor] = parse_transform(src.read_text(rel), src.describe(rel))
     else:
         warnings.warn(f"{src.location}: no transforms/ folder; using the built-in rig extrinsics",
                       CalibrationWarning, stacklevel=2)
     return Calibration(radars["cascade"], radars["single_chip"], transforms, src.location)
 
 
-def write_calibration(calib: Calibration, folder: str | os.PathLike[str]) -> Path:
+def write_calibration(calib: Calibration, folder: str | os.PathLike[str], *,
+                      layout: str | RunLayout = "coloradar") -> Path:
     """Write ``calib`` as a dataset calib folder (``cascade/``, ``single_chip/``, ``transforms/``).
 
+    With ``layout="coloradar_plus"`` only the radars and transforms of that layout are
+    written, under its file names (``transforms/base_to_radar.txt`` for the cascade).
     Every file is written atomically. Returns the folder.
     """
+    lay = get_layout(layout)
     root = Path(folder)
-    for name in RADARS:
+    for name in lay.calib_radars:
         rc = calib.radar(name)
         d = root / name
         atomic_write_text(d / "waveform_cfg.txt", format_waveform_cfg(rc.waveform))
@@ -241,5 +255,7 @@ def write_calibration(calib: Calibration, folder: str | os.PathLike[str]) -> Pat
             atomic_write_text(d / "phase_frequency_calib.txt",
                               format_phase_frequency_calib(rc.phase_frequency))
     for sensor, ext in calib.transforms.items():
-        atomic_write_text(root / "transforms" / f"base_to_{sensor}.txt", format_transform(ext))
+        if lay.name == "coloradar" or sensor in lay.transforms:
+            fname = lay.transforms.get(sensor, f"base_to_{sensor}.txt")
+            atomic_write_text(root / "transforms" / fname, format_transform(ext))
     return root

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CalibrationError, CalibrationWarning
-from ._parse import readonly
+from ._parse import check_finite, readonly
 
 __all__ = ["Extrinsic", "format_transform", "parse_transform"]
 
@@ -42,6 +42,8 @@ class Extrinsic:
         n = np.linalg.norm(q)
         if not np.isfinite(n) or n < 1e-6:
             raise CalibrationError(f"extrinsic: quaternion {q.tolist()} has no direction")
+        if not np.all(np.isfinite(t)):
+            raise CalibrationError(f"extrinsic: translation {t.tolist()} is not finite")
         object.__setattr__(self, "translation", readonly(t))
         object.__setattr__(self, "quaternion", readonly(q / n))
 
@@ -65,6 +67,11 @@ def parse_transform(text: str, name: str = "base_to_sensor.txt") -> Extrinsic:
         q = np.array(lines[1], dtype=np.float64)
     except ValueError:
         raise CalibrationError(f"{name}: expected numbers") from None
+    check_finite(t, name, "the translation 'x y z'")
+    check_finite(q, name, "the quaternion 'qx qy qz qw'")
+    if np.any(np.abs(t) > 1000.0):
+        raise CalibrationError(f"{name}: translation {t.tolist()} m; expected a sensor within "
+                               "1 km of the rig's base")
     n = float(np.linalg.norm(q))
     if not np.isfinite(n) or n < 1e-6:
         raise CalibrationError(f"{name}: quaternion {q.tolist()} has no direction")

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 from ..errors import CalibrationError, CalibrationWarning
 from ._parse import get_number, key_values
 
-__all__ = ["SPEED_OF_LIGHT", "WaveformConfig", "format_waveform_cfg", "parse_waveform_cfg"]
+__all__ = ["SPEED_OF_LIGHT", "WaveformConfig", "check_waveform_bounds", "format_waveform_cfg",
+           "parse_waveform_cfg"]
 
 SPEED_OF_LIGHT = 299_792_458.0
 """Speed of light in vacuum [m/s]."""
@@ -35,14 +38,7 @@ class WaveformConfig:
     slope: float
 
     def __post_init__(self) -> None:
-        for f in ("num_rx", "num_tx", "num_samples", "num_chirps"):
-            if getattr(self, f) <= 0:
-                raise CalibrationError(f"waveform: {f} must be positive, got {getattr(self, f)}")
-        for f in ("sample_rate", "start_frequency", "slope", "ramp_end_time"):
-            if getattr(self, f) <= 0:
-                raise CalibrationError(f"waveform: {f} must be positive, got {getattr(self, f)}")
-        if self.idle_time < 0 or self.adc_start_time < 0:
-            raise CalibrationError("waveform: idle_time and adc_start_time must not be negative")
+        check_waveform_bounds({f: getattr(self, f) for f in _BOUNDS}, "waveform")
 
     # --- sizes ---------------------------------------------------------------------------------
     @property
@@ -128,7 +124,53 @@ _KEYS = {
 }
 
 
-def _fix_units(values: dict[str, float], name: str) -> dict[str, float]:
+_FILE_KEY = {field: key for key, (field, _) in _KEYS.items()}
+
+# Physically sensible ranges, generous around what FMCW radars use (TI xWR/MMWCAS: 1–16 chips,
+# 60–81 GHz carriers, ≤ 25 Msps, slopes ≤ 250 MHz/µs, chirps of tens of µs): a value outside is
+# a broken file (a unit error, a NaN), never a radar to process. ``(low, high, unit, low_open)``.
+_BOUNDS: dict[str, tuple[float, float, str, bool]] = {
+    "num_rx": (1, 256, "", False),
+    "num_tx": (1, 256, "", False),
+    "num_samples": (1, 65536, "", False),
+    "num_chirps": (1, 65536, "", False),
+    "sample_rate": (1e4, 1e9, "Hz", False),
+    "start_frequency": (1e9, 1e12, "Hz", False),
+    "idle_time": (0.0, 1e-2, "s", False),
+    "adc_start_time": (0.0, 1e-2, "s", False),
+    "ramp_end_time": (0.0, 1e-2, "s", True),
+    "slope": (1e9, 1e16, "Hz/s", False),
+}
+
+
+def check_waveform_bounds(values: dict[str, float], where: str) -> None:
+    """Refuse a non-finite value or one outside its physically sensible range.
+
+    Parameters
+    ----------
+    values
+        Field name (as in :class:`WaveformConfig`) to value; fields not given are not checked.
+    where
+        The file (or ``"waveform"``) named in the message.
+
+    Raises
+    ------
+    CalibrationError
+        Naming ``where``, the key as the file spells it, the value and the accepted range.
+    """
+    for f, v in values.items():
+        if f not in _BOUNDS:
+            continue
+        lo, hi, unit, lo_open = _BOUNDS[f]
+        ok = math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi
+        if not ok:
+            u = f" {unit}" if unit else ""
+            raise CalibrationError(
+                f"{where}: {_FILE_KEY[f]} = {v!r}{u} is not physically sensible; expected a "
+                f"finite value in {'(' if lo_open else '['}{lo:g}, {hi:g}]{u}")
+
+
+def _fix_units(values: dict[str, Any], name: str) -> dict[str, Any]:
     """Correct the unit defects of the real cascade file, with a warning for each change.
 
     Chirp times of TI radars are microseconds to a few hundred microseconds. A value above 10 ms
@@ -160,7 +202,12 @@ def parse_waveform_cfg(text: str, name: str = "waveform_cfg.txt") -> WaveformCon
     """Parse a ``waveform_cfg.txt`` text, correcting known unit defects with a warning."""
     kv = key_values(text, name)
     values = {field: get_number(kv, key, name, kind) for key, (field, kind) in _KEYS.items()}
-    return WaveformConfig(**_fix_units(values, name))
+    # Sizes and frequencies are checked before the unit fixes use them, the times after (a
+    # time in µs is a known defect, corrected with a warning).
+    check_waveform_bounds({f: v for f, v in values.items() if not f.endswith("_time")}, name)
+    fixed = _fix_units(values, name)
+    check_waveform_bounds(fixed, name)
+    return WaveformConfig(**fixed)
 
 
 def format_waveform_cfg(w: WaveformConfig) -> str:

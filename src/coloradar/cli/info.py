@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..calib import load_calibration
 from ..dataset import open_dataset, open_sequence
 from ..dataset.dataset import is_run_folder
-from ..dataset.info import format_calibration_summary, format_sequence_summary
+from ..dataset.info import (
+    format_calibration_summary,
+    format_sequence_summary,
+    summarize_sequence,
+)
+from ..errors import ColoradarError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,12 +34,24 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if path.is_dir() and not is_run_folder(path):
         ds = open_dataset(path, calib=args.calib)
-        print(f"dataset {path}: {len(ds)} runs")
-        for seq in ds:
-            print(format_sequence_summary(seq))
-        print(format_calibration_summary(ds.calib))
-        return 0
+        kind = "" if ds.layout.name == "coloradar" else f" ({ds.layout.title} layout)"
+        print(f"dataset {path}: {len(ds)} runs{kind}")
+        bad = 0
+        for name in ds.sequences:  # one bad run is reported, and the others still are
+            try:
+                summaries = summarize_sequence(ds[name])
+                print(format_sequence_summary(ds[name], summaries))
+                bad += any(s.errors for s in summaries)
+            except ColoradarError as exc:
+                print(f"run {name}: error: {exc}")
+                bad += 1
+        print(format_calibration_summary(ds))
+        if bad:
+            print(f"coloradar: error: {bad} of {len(ds)} runs have unreadable or malformed "
+                  "files (marked ! above)", file=sys.stderr)
+        return 1 if bad else 0
     seq = open_sequence(path, calib=args.calib)
-    print(format_sequence_summary(seq))
+    summaries = summarize_sequence(seq)
+    print(format_sequence_summary(seq, summaries))
     print(format_calibration_summary(seq))
-    return 0
+    return 1 if any(s.errors for s in summaries) else 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
 import warnings
@@ -44,9 +45,26 @@ def main(argv: list[str] | None = None) -> int:
     warnings.simplefilter("once")
     warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, inside the handler below
+        return code
+    except BrokenPipeError:
+        # The reader went away (`coloradar info | head -1`): not an error of ours. Point stdout
+        # at /dev/null so that the interpreter's final flush does not fail again.
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 141  # 128 + SIGPIPE, what a shell reports for a command ended by a closed pipe
     except ColoradarError as exc:
         print(f"coloradar: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        # Every file coloradar reads or writes goes through a helper that raises a named error;
+        # this is the net for what no helper saw (a disk failing mid-run...).
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"coloradar: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("coloradar: interrupted", file=sys.stderr)

@@ -21,6 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output .pcd or .ply file")
     p.add_argument("--sensor", default="lidar", choices=sorted(MAP_SOURCES),
                    help="whose point clouds (default: lidar)")
+    p.add_argument("--products",
+                   help="output folder of 'coloradar process' for this run: radar point "
+                        "clouds are read from it (the cascade has none of its own)")
     p.add_argument("--start", type=float, default=0.0,
                    help="window start, seconds after the first ground-truth pose (default 0)")
     p.add_argument("--duration", type=float, help="window length in seconds (default: to the end)")
@@ -36,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = new_output_file(args.out, args.overwrite)
-    seq = open_sequence(args.run, calib=args.calib)
+    seq = open_sequence(args.run, calib=args.calib, products=args.products)
     m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
                   voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,
                   min_range=args.min_range,

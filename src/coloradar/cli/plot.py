@@ -6,7 +6,7 @@ import argparse
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ._common import add_file_output_args, new_output_file
+from ._common import add_file_output_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,7 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frame", type=int, default=0,
                    help="frame index (of the radar's stream; for scene, of --stream)")
     p.add_argument("--out", required=True, help="output image (.png, .pdf, .svg)")
-    p.add_argument("--radar", default="cascade", choices=RADARS, help="which radar")
+    p.add_argument("--radar", choices=RADARS,
+                   help="which radar (default: cascade; for scene, both radars; a radar named "
+                        "for scene shows it alone, --frame counting its frames)")
     p.add_argument("--coords", default="base",
                    help="scene frame: base (default), world, or a sensor name (e.g. cascade)")
     p.add_argument("--scene-view", default="bev", choices=("bev", "3d"),
@@ -42,8 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..viz import frame_figure, save_figure
+    from ..viz._figure import check_image_path
 
-    out = new_output_file(args.out, args.overwrite)
+    out = check_image_path(args.out, args.overwrite)
     seq = open_sequence(args.run, calib=args.calib)
     fig = frame_figure(seq, args.view, args.frame, radar=args.radar, coords=args.coords,
                        scene_view=args.scene_view, stream=args.stream, extent=args.extent,

@@ -42,13 +42,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--write-scene", type=Path, metavar="FILE",
                    help="write the scene's JSON description to FILE (a start for your own "
                         "scene); simulates only if OUT is given too")
+    p.add_argument("--layout", choices=("coloradar", "coloradar_plus"), default="coloradar",
+                   help="dataset layout to write (default coloradar; coloradar_plus: runs in "
+                        "OUT/kitti/, frames from 1, cascade/lidar/IMU/ground truth only; "
+                        "see docs/layout.md)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..formats import atomic_write_text
-    from ..sim.run import resolve_scene, simulate_run
+    from ..sim.run import SENSOR_CHOICES, resolve_scene, simulate_run
 
     if args.write_scene is not None:
         if args.write_scene.exists() and not args.overwrite:
@@ -59,13 +63,15 @@ def run(args: argparse.Namespace) -> int:
             return 0
     if args.out is None:
         raise ColoradarError("give an output folder OUT (or --write-scene FILE)")
-    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
+    sensors: list[str] | None = [s.strip() for s in args.sensors.split(",") if s.strip()]
+    if args.sensors == ",".join(SENSOR_CHOICES):
+        sensors = None                  # the default: every sensor of the layout
     prog = StageProgress("simulate", enabled=not args.quiet)
     try:
         res = simulate_run(args.out, scene=args.scene, duration=args.duration, seed=args.seed,
                            motion=args.motion, sensors=sensors, vicon=args.vicon,
                            heatmaps=False if args.no_heatmaps else None, name=args.name,
-                           overwrite=args.overwrite, progress=prog)
+                           overwrite=args.overwrite, progress=prog, layout=args.layout)
     finally:
         prog.close()
     print(f"simulated {args.duration:g} s of scene {res.scene!r} in {res.seconds:.1f} s")

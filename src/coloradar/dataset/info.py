@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ColoradarError
+from ..formats.layout import COLORADAR
 from .sequence import Sequence
 
 __all__ = ["StreamSummary", "format_sequence_summary", "summarize_sequence", "summarize_timestamps"]
@@ -34,6 +35,9 @@ class StreamSummary:
     issues
         Inconsistencies found when reading (e.g. timestamp/frame count mismatch) or the error
         that prevented reading.
+    errors
+        How many of ``issues`` are errors (an unreadable stream, a malformed frame file) rather
+        than inconsistencies the readers work around.
     """
 
     name: str
@@ -44,6 +48,7 @@ class StreamSummary:
     gaps: list[tuple[int, float]] = field(default_factory=list)
     non_monotonic: int = 0
     issues: list[str] = field(default_factory=list)
+    errors: int = 0
 
 
 def summarize_timestamps(name: str, t: np.ndarray, gap_factor: float = 1.5) -> StreamSummary:
@@ -70,6 +75,7 @@ def summarize_sequence(seq: Sequence) -> list[StreamSummary]:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # reported through ``issues`` instead
+                bad = []
                 if key in ("imu", "groundtruth", "vicon"):
                     obj = getattr(seq, key)
                     ts, issues = obj.timestamps, obj.issues
@@ -77,10 +83,12 @@ def summarize_sequence(seq: Sequence) -> list[StreamSummary]:
                     sensor, product = key.split("/")
                     stream = getattr(getattr(seq, sensor), product)
                     ts, issues = stream.timestamps, stream.issues
+                    bad = stream.check_files()
             s = summarize_timestamps(key, ts)
-            s.issues = list(issues)
+            s.issues = list(issues) + bad
+            s.errors = len(bad)
         except ColoradarError as exc:
-            s = StreamSummary(key, issues=[f"unreadable: {exc}"])
+            s = StreamSummary(key, issues=[f"unreadable: {exc}"], errors=1)
         out.append(s)
     return out
 
@@ -95,7 +103,8 @@ def _fmt_gaps(s: StreamSummary) -> str:
 def format_sequence_summary(seq: Sequence, summaries: list[StreamSummary] | None = None) -> str:
     """A human-readable table of ``seq``'s streams and calibration."""
     summaries = summarize_sequence(seq) if summaries is None else summaries
-    lines = [f"run {seq.name}  ({seq.location})"]
+    kind = "" if seq.layout.name == "coloradar" else f", {seq.layout.title} layout"
+    lines = [f"run {seq.name}  ({seq.location}{kind})"]
     header = f"  {'stream':<24}{'frames':>8}{'duration':>11}{'rate':>10}  gaps"
     lines.append(header)
     for s in summaries:
@@ -111,8 +120,11 @@ def format_sequence_summary(seq: Sequence, summaries: list[StreamSummary] | None
 def format_calibration_summary(seq_or_calib) -> str:
     """Calibration lines for ``info``: source and each radar's derived quantities."""
     calib = getattr(seq_or_calib, "calib", seq_or_calib)
+    layout = getattr(seq_or_calib, "layout", COLORADAR)
     lines = [f"calibration: {calib.source}"]
-    for name in ("cascade", "single_chip"):
+    for name in layout.radars:
         lines.append(f"  {name}: {calib.radar(name).summary()}")
-    lines.append(f"  transforms: {', '.join(sorted(calib.transforms)) or 'none'}")
+    shown = [t for t in sorted(calib.transforms)
+             if layout.name == COLORADAR.name or t in layout.transforms]
+    lines.append(f"  transforms: {', '.join(shown) or 'none'}")
     return "\n".join(lines)

@@ -10,7 +10,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import DataWarning, FormatError, MissingDataError
+from ..errors import (
+    ColoradarError,
+    DataWarning,
+    FormatError,
+    FrameIndexError,
+    MissingDataError,
+    ReadError,
+)
 from ..formats.source import Source
 from ..formats.text import parse_imu, parse_poses, parse_timestamps
 
@@ -72,11 +79,53 @@ class FrameStream:
         rel = self._paths[self._index(k)]
         return self._decode(self._source.read_bytes(rel), self._source.describe(rel))
 
+    def versions(self) -> list[str]:
+        """For every frame, a short text that changes whenever its file is rewritten (size and
+        modification time, or a zip member's size, CRC and date; see
+        :meth:`~coloradar.formats.source.Source.version_key`). Nothing is read: what a
+        resumable job records to tell later which inputs changed since it ran."""
+        return [self._source.version_key(rel) for rel in self._paths]
+
+    def read_or_skip(self, k: int) -> np.ndarray | None:
+        """Frame ``k``, or None with a :class:`~coloradar.DataWarning` naming the file and what
+        is wrong when it cannot be read (malformed, not a regular file, vanished): what the
+        commands that walk many frames use, so that one bad frame is reported and skipped, as
+        ``coloradar process`` does, instead of ending the whole command."""
+        try:
+            return self.read(k)
+        except (FormatError, ReadError, MissingDataError) as exc:
+            warnings.warn(f"{exc}; {self.name} frame {k} skipped", DataWarning, stacklevel=2)
+            return None
+
+    def check_files(self) -> list[str]:
+        """Problems of the frame files, found without reading them: a file that is not a
+        regular file, or whose size its kind (and the calibration) does not allow.
+
+        Each distinct size is checked once, by decoding that many zero bytes with the stream's
+        own decoder (which checks sizes only), so the rule is the reader's. Returns one line
+        per problem (empty: every file has a size the reader accepts).
+        """
+        problems: list[str] = []
+        by_size: dict[int, list[str]] = {}
+        for rel in self._paths:
+            try:
+                by_size.setdefault(self._source.file_size(rel), []).append(rel)
+            except ColoradarError as exc:
+                problems.append(str(exc))
+        for size, rels in sorted(by_size.items()):
+            try:
+                self._decode(bytes(size), self._source.describe(rels[0]))
+            except FormatError as exc:
+                more = f" (and {len(rels) - 1} more file(s) of that size)" if len(rels) > 1 else ""
+                problems.append(f"{exc}{more}")
+        return problems
+
     def _index(self, k: int) -> int:
         k = operator.index(k)
         n = len(self._paths)
         if not -n <= k < n:
-            raise IndexError(f"{self.name}: frame {k} out of range (the stream has {n} frames)")
+            raise FrameIndexError(f"{self._source.location}: {self.name} frame {k} out of range "
+                                  f"(the stream has {n} frames: 0..{n - 1}, or -{n}..-1)")
         return k % n
 
     def __getitem__(self, key):
@@ -96,14 +145,18 @@ _FRAME_RE = re.compile(r"^(?P<prefix>.+)_(?P<num>\d+)\.bin$")
 
 
 def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix: str,
-                      decode: Decoder) -> FrameStream:
-    """Index a stream of frame files ``<data_dir>/<prefix>_<i>.bin`` with ``<folder>/timestamps.txt``.
+                      decode: Decoder, *, timestamps: str = "timestamps.txt",
+                      first_frame: int = 0) -> FrameStream:
+    """Index a stream of frame files ``<data_dir>/<prefix>_<i>.bin`` with
+    ``<folder>/<timestamps>``.
 
-    Frame numbers may start at 0 (original release) or 1 (derived release). The ``i``-th
-    timestamp belongs to the file numbered ``base + i``. Timestamps without a file and files
-    without a timestamp are left out with a :class:`DataWarning` (and noted in ``issues``).
+    Frame numbers may start at 0 (original release) or 1 (derived release, ColoRadar+). The
+    ``i``-th timestamp belongs to the file numbered ``base + i``, ``base`` being the number of
+    the first file when it is 0 or 1, else the layout's ``first_frame``. Timestamps without a
+    file and files without a timestamp are left out with a :class:`DataWarning` (and noted in
+    ``issues``).
     """
-    ts = read_timestamps(src, f"{folder}/timestamps.txt")
+    ts = read_timestamps(src, f"{folder}/{timestamps}")
     if not src.is_dir(data_dir):
         raise MissingDataError(f"{src.describe(data_dir)}: frame folder not found")
     ids = []
@@ -112,7 +165,7 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
         if m and m["prefix"] == prefix:
             ids.append(int(m["num"]))
     ids_arr = np.array(sorted(ids), dtype=np.int64)
-    base = 0 if (ids_arr.size == 0 or ids_arr[0] == 0) else 1 if ids_arr[0] == 1 else 0
+    base = int(ids_arr[0]) if ids_arr.size and ids_arr[0] in (0, 1) else first_frame
     wanted = base + np.arange(ts.size, dtype=np.int64)
     has = np.isin(wanted, ids_arr)
     issues = []

@@ -9,7 +9,8 @@ array      virtual array → azimuth × elevation FFT grid, bin angles, beamform
 angle      Bartlett and Capon/MVDR spectra per detection, sub-bin peak refinement
 heatmap    peak-over-Doppler heatmap in the dataset's format
 cfar       CA/GO/SO/OS CFAR in 1D/2D/3D with thresholds from a false-alarm probability
-detect     detections, point clouds, point clouds from (shipped) heatmaps
+detect     detections, point clouds, point clouds from (shipped) heatmaps, cell placement
+points     points of any radar frame (ADC, heatmap, shipped cloud): one converter for all
 signs      which azimuth/elevation sign convention matches a sensor's own point clouds
 =========  ==============================================================================
 
@@ -28,8 +29,15 @@ from .cube import (
     remove_dc,
     signed_doppler_bins,
 )
-from .detect import Detections, heatmap_pointcloud, local_maxima
+from .detect import Detections, heatmap_cell_xyz, heatmap_pointcloud, local_maxima
 from .heatmap import heatmap_from_elements
+from .points import (
+    POINT_SOURCES,
+    FramePoints,
+    PointSource,
+    default_point_source,
+    radar_point_stream,
+)
 from .processor import ProcessingSettings, RadarProcessor
 from .signs import SignMatch, match_sign_convention
 from .tdm import compensate_tdm, tdm_phase
@@ -38,10 +46,13 @@ from .windows import WINDOWS, coherent_window, window
 __all__ = [
     "CFAR_KINDS",
     "OVERLAP_MODES",
+    "POINT_SOURCES",
     "WINDOWS",
     "AngleGrid",
     "CFARResult",
     "Detections",
+    "FramePoints",
+    "PointSource",
     "ProcessingSettings",
     "RadarProcessor",
     "SignMatch",
@@ -58,13 +69,16 @@ __all__ = [
     "compensate_tdm",
     "coupling_signal",
     "covariance",
+    "default_point_source",
     "doppler_fft",
     "false_alarm_rate",
+    "heatmap_cell_xyz",
     "heatmap_from_elements",
     "heatmap_pointcloud",
     "local_maxima",
     "match_sign_convention",
     "phase_frequency_factors",
+    "radar_point_stream",
     "range_fft",
     "refine_peak",
     "remove_dc",

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from ..calib import AntennaConfig, VirtualArray
-from ..errors import CalibrationError
+from ..errors import CalibrationError, SettingsError
 
 __all__ = ["OVERLAP_MODES", "AngleGrid", "angle_grid", "beamform", "combine_channels", "sines_to_unit"]
 
@@ -140,7 +140,7 @@ def angle_grid(antenna: AntennaConfig, carrier_frequency: float, num_el: int, nu
         +1 or −1 (DESIGN.md §3).
     """
     if azimuth_sign not in (1, -1) or elevation_sign not in (1, -1):
-        raise ValueError("azimuth_sign and elevation_sign must be +1 or -1")
+        raise SettingsError("azimuth_sign and elevation_sign must be +1 or -1")
     pos = antenna.virtual.unique_positions
     ipos = np.rint(pos).astype(np.int64)
     if np.any(np.abs(pos - ipos) > 1e-6):
@@ -185,7 +185,7 @@ def combine_channels(cube: np.ndarray, virtual: VirtualArray, mode: str = "first
         sums = np.add.reduceat(flat[order], starts, axis=0)
         inv = (1.0 / counts).astype(flat.real.dtype)
         return sums * inv.reshape((-1,) + (1,) * (sums.ndim - 1))
-    raise ValueError(f"unknown overlap mode {mode!r}; expected one of {', '.join(OVERLAP_MODES)}")
+    raise SettingsError(f"unknown overlap mode {mode!r}; expected one of {', '.join(OVERLAP_MODES)}")
 
 
 def beamform(grid: AngleGrid, values: np.ndarray, el_pos: np.ndarray | None = None,

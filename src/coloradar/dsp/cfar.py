@@ -27,16 +27,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from math import comb
+from typing import Literal
 
 import numpy as np
 from scipy import integrate, optimize, special, stats
 from scipy.ndimage import correlate1d, rank_filter
 
+from ..errors import SettingsError
+
 __all__ = ["CFAR_KINDS", "CFARResult", "cfar", "cfar_scale", "cfar_window", "false_alarm_rate"]
 
 CFAR_KINDS = ("ca", "go", "so", "os")
-_MODES = {"wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"),
-          "reflect": ("reflect", "symmetric")}   # name -> (scipy.ndimage mode, np.pad mode)
+# name -> (scipy.ndimage mode, np.pad mode)
+_MODES: dict[str, tuple[str, Literal["wrap", "reflect", "symmetric"]]] = {
+    "wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"), "reflect": ("reflect", "symmetric")}
 
 
 @dataclass(frozen=True)
@@ -62,9 +66,9 @@ class CFARResult:
 
 
 def _per_axis(v: int | tuple[int, ...], ndim: int, what: str) -> tuple[int, ...]:
-    t = (int(v),) * ndim if np.isscalar(v) else tuple(int(x) for x in v)
+    t = tuple(int(x) for x in v) if isinstance(v, tuple | list | np.ndarray) else (int(v),) * ndim
     if len(t) != ndim or min(t) < 0:
-        raise ValueError(f"{what} must be a non-negative int or one per axis ({ndim}), got {v!r}")
+        raise SettingsError(f"{what} must be a non-negative int or one per axis ({ndim}), got {v!r}")
     return t
 
 
@@ -86,7 +90,7 @@ def _os_rank(rank: float | int, n: int) -> int:
     else:
         k = round(float(rank) * n)
     if not 1 <= k <= n:
-        raise ValueError(f"OS rank {rank!r} gives k = {k}, outside 1..{n} training cells")
+        raise SettingsError(f"OS rank {rank!r} gives k = {k}, outside 1..{n} training cells")
     return k
 
 
@@ -145,7 +149,7 @@ def _numeric_pfa(kind: str, a: float, n: int, k: int, L: int) -> float:
         def dens(z):
             return np.exp(logc + (k - 1) * g.logcdf(z) + (n - k) * g.logsf(z) + g.logpdf(z))
     else:
-        raise ValueError(f"unknown CFAR kind {kind!r}")
+        raise SettingsError(f"unknown CFAR kind {kind!r}")
     lo, hi = g.ppf(1e-14) * 0.5, g.ppf(1 - 1e-14) * 2.0
 
     def integrand(z):
@@ -163,18 +167,18 @@ def cfar_scale(kind: str, num_train: int, pfa: float, *, rank: int = 0, looks: i
     Parameters are as in :func:`false_alarm_rate` (``num_train`` = cells per half for GO/SO).
     """
     if kind not in CFAR_KINDS:
-        raise ValueError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
+        raise SettingsError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
     if not 0.0 < pfa < 1.0:
-        raise ValueError(f"pfa must lie in (0, 1), got {pfa!r}")
+        raise SettingsError(f"pfa must lie in (0, 1), got {pfa!r}")
     if num_train < 1:
-        raise ValueError("a CFAR window needs at least one training cell")
+        raise SettingsError("a CFAR window needs at least one training cell")
     n, L = int(num_train), int(looks)
     if kind == "ca" and L == 1:
         return float(n * (pfa ** (-1.0 / n) - 1.0))
     if kind == "ca":
         return float(stats.f.isf(pfa, 2 * L, 2 * n * L))
     if kind == "os" and not 1 <= rank <= n:
-        raise ValueError(f"OS rank {rank} outside 1..{n}")
+        raise SettingsError(f"OS rank {rank} outside 1..{n}")
 
     def f(log_a: float) -> float:
         return np.log(false_alarm_rate(kind, np.exp(log_a), n, rank=rank, looks=L)) - np.log(pfa)
@@ -183,8 +187,8 @@ def cfar_scale(kind: str, num_train: int, pfa: float, *, rank: int = 0, looks: i
     while f(hi) > 0:
         hi += 2.0
         if hi > 60:
-            raise ValueError(f"no {kind.upper()}-CFAR threshold reaches pfa={pfa} with "
-                             f"{n} training cells")
+            raise SettingsError(f"no {kind.upper()}-CFAR threshold reaches pfa={pfa} with "
+                                f"{n} training cells")
     return float(np.exp(optimize.brentq(f, -30.0, hi, xtol=1e-12)))
 
 
@@ -250,19 +254,19 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
     g, t = _per_axis(guard, nd, "guard"), _per_axis(train, nd, "train")
     modes = (mode,) * nd if isinstance(mode, str) else tuple(mode)
     if len(modes) != nd or any(m not in _MODES for m in modes):
-        raise ValueError(f"mode must be one of {', '.join(_MODES)} (or one per axis), got {mode!r}")
+        raise SettingsError(f"mode must be one of {', '.join(_MODES)} (or one per axis), got {mode!r}")
     h = tuple(a + b for a, b in zip(g, t, strict=True))
     for ax, m in enumerate(modes):
         if m != "wrap" and x.shape[ax] <= h[ax]:
-            raise ValueError(f"axis {ax} has {x.shape[ax]} cells, too few for a window of "
-                             f"half-width {h[ax]} with mode {m!r}")
+            raise SettingsError(f"axis {ax} has {x.shape[ax]} cells, too few for a window of "
+                                f"half-width {h[ax]} with mode {m!r}")
     n_all, n_half = cfar_window(g, t, split_axis)
     if kind == "ca":
         noise = _ring_sum(x, g, h, modes) / n_all
         scale = cfar_scale("ca", n_all, pfa, looks=looks)
     elif kind in ("go", "so"):
         if n_half < 1:
-            raise ValueError("GO/SO-CFAR needs training cells on both sides of split_axis")
+            raise SettingsError("GO/SO-CFAR needs training cells on both sides of split_axis")
         ax = split_axis % nd
         lead = _ring_sum(x, g, h, modes, -1, ax) / n_half
         lag = _ring_sum(x, g, h, modes, 1, ax) / n_half
@@ -283,6 +287,6 @@ def cfar(power: np.ndarray, kind: str = "ca", guard: int | tuple[int, ...] = 1,
         noise = full[tuple(slice(v, v + s) for v, s in zip(h, x.shape, strict=True))]
         scale = cfar_scale("os", n_all, pfa, rank=k, looks=looks)
     else:
-        raise ValueError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
+        raise SettingsError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
     threshold = scale * noise
     return CFARResult(x > threshold, threshold, noise, scale)

@@ -19,7 +19,7 @@ from ..errors import FormatError
 from .array import sines_to_unit
 from .cfar import cfar
 
-__all__ = ["Detections", "heatmap_pointcloud", "local_maxima"]
+__all__ = ["Detections", "heatmap_cell_xyz", "heatmap_pointcloud", "local_maxima"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,6 +74,31 @@ def local_maxima(power: np.ndarray, mode: str | tuple[str, ...]) -> np.ndarray:
     return power >= maximum_filter(power, size=3, mode=mode)
 
 
+def heatmap_cell_xyz(config: HeatmapConfig, el: np.ndarray, az: np.ndarray,
+                     rng: np.ndarray) -> np.ndarray:
+    """Radar-frame positions of heatmap cells: the one heatmap-cell placement of coloradar.
+
+    Parameters
+    ----------
+    config
+        The heatmap's grid (angle lists in radians, range bin width in metres).
+    el, az, rng
+        int ``(N,)``: elevation, azimuth and range indices of the cells.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 ``(N, 3)`` [m]: ``r·width·(√(1 − u_y² − u_z²), u_y, u_z)`` with
+        ``u_y = sin(azimuth_bins[az])``, ``u_z = sin(elevation_bins[el])`` (an FFT grid
+        measures direction sines, see :func:`heatmap_pointcloud`). Corner cells outside the
+        visible region (``u_y² + u_z² > 1``) are projected onto its edge so that they keep
+        their range.
+    """
+    u = sines_to_unit(np.sin(config.azimuth_bins[np.asarray(az)]),
+                      np.sin(config.elevation_bins[np.asarray(el)]))
+    return (np.asarray(rng) * config.range_bin_width)[..., None] * u
+
+
 def heatmap_pointcloud(heatmap: np.ndarray, config: HeatmapConfig, *, kind: str = "ca",
                        guard: int | tuple[int, int, int] = (0, 1, 1),
                        train: int | tuple[int, int, int] = (0, 4, 4), pfa: float = 1e-4,
@@ -126,12 +151,8 @@ def heatmap_pointcloud(heatmap: np.ndarray, config: HeatmapConfig, *, kind: str 
         mask &= local_maxima(p, "mirror")
     mask[:, :, : int(np.ceil(min_range / config.range_bin_width))] = False
     e, a, r = np.nonzero(mask)
-    # Corner cells of the grid lie outside the visible region (u_y² + u_z² > 1); sines_to_unit
-    # projects them onto its edge so that every point keeps its range.
-    u = sines_to_unit(np.sin(config.azimuth_bins[a]), np.sin(config.elevation_bins[e]))
-    rng = r * config.range_bin_width
     out = np.empty((e.size, 5), dtype=np.float32)
-    out[:, :3] = rng[:, None] * u
+    out[:, :3] = heatmap_cell_xyz(config, e, a, r)
     out[:, 3] = hm[e, a, r, 0]
     out[:, 4] = hm[e, a, r, 1]
     return out

@@ -20,13 +20,14 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 import scipy.fft as sfft
 
 from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
-from ..errors import FormatError
+from ..errors import FormatError, SettingsError
 from .angle import bartlett_spectrum, capon_spectrum, refine_peak
 from .array import OVERLAP_MODES, angle_grid, combine_channels, sines_to_unit
 from .cfar import CFAR_KINDS, cfar, cfar_scale, cfar_window
@@ -127,14 +128,14 @@ class ProcessingSettings:
                    "engine": ENGINES}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
-                raise ValueError(f"{name} = {getattr(self, name)!r}; expected one of "
-                                 f"{', '.join(map(str, allowed))}")
+                raise SettingsError(f"{name} = {getattr(self, name)!r}; expected one of "
+                                    f"{', '.join(map(str, allowed))}")
         if not 0.0 < self.pfa < 1.0:
-            raise ValueError(f"pfa must lie in (0, 1), got {self.pfa!r}")
+            raise SettingsError(f"pfa must lie in (0, 1), got {self.pfa!r}")
         if self.angle_oversample < 1 or self.capon_loading <= 0:
-            raise ValueError("angle_oversample must be >= 1 and capon_loading > 0")
-        object.__setattr__(self, "cfar_guard", tuple(int(v) for v in self.cfar_guard))
-        object.__setattr__(self, "cfar_train", tuple(int(v) for v in self.cfar_train))
+            raise SettingsError("angle_oversample must be >= 1 and capon_loading > 0")
+        for name in ("cfar_guard", "cfar_train"):
+            object.__setattr__(self, name, _range_doppler_pair(name, getattr(self, name)))
 
     def replace(self, **changes) -> ProcessingSettings:
         """A copy with some settings changed (unknown names raise ``TypeError``)."""
@@ -158,8 +159,8 @@ class ProcessingSettings:
         name, sep, value = text.partition("=")
         name, value = name.strip(), value.strip()
         if not sep or name not in names:
-            raise ValueError(f"expected NAME=VALUE with NAME one of {', '.join(names)}; "
-                             f"got {text!r}")
+            raise SettingsError(f"expected NAME=VALUE with NAME one of {', '.join(names)}; "
+                                f"got {text!r}")
         default = defaults[name]
         try:
             if value.lower() == "none" and default is None:
@@ -176,7 +177,22 @@ class ProcessingSettings:
                 return name, float(value)
             return name, value
         except ValueError:
-            raise ValueError(f"{name}: cannot use {value!r} (default {default!r})") from None
+            raise SettingsError(f"{name}: cannot use {value!r} (default {default!r})") from None
+
+
+def _range_doppler_pair(name: str, value: Any) -> tuple[int, int]:
+    """A CFAR window size as ``(range, Doppler)`` cells: one number stands for both axes."""
+    try:
+        t = tuple(int(v) for v in value) if isinstance(value, (tuple, list)) else (int(value),)
+    except (TypeError, ValueError):
+        raise SettingsError(f"{name} = {value!r}; expected cells along range and Doppler, "
+                            "e.g. (1, 2), or one number for both") from None
+    if len(t) == 1:
+        t = (t[0], t[0])
+    if len(t) != 2 or min(t) < 0:
+        raise SettingsError(f"{name} = {value!r}; expected two non-negative cell counts "
+                            "(range, Doppler), or one for both")
+    return (t[0], t[1])
 
 
 class RadarProcessor:
@@ -210,9 +226,9 @@ class RadarProcessor:
         self.num_range_bins = int(s.num_range_bins
                                   or -(-hm.num_range_bins * self.range_fft_size // ns))
         if self.range_fft_size < ns or self.doppler_fft_size < nc:
-            raise ValueError(f"FFT sizes must be at least {ns} samples and {nc} chirp loops")
+            raise SettingsError(f"FFT sizes must be at least {ns} samples and {nc} chirp loops")
         if not 0 < self.num_range_bins <= self.range_fft_size:
-            raise ValueError(f"num_range_bins must lie in 1..{self.range_fft_size}")
+            raise SettingsError(f"num_range_bins must lie in 1..{self.range_fft_size}")
         nd = self.doppler_fft_size
         self.range_bin_width = SPEED_OF_LIGHT * w.sample_rate / (2.0 * w.slope
                                                                  * self.range_fft_size)

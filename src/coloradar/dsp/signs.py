@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..calib import RadarCalib
+from ..errors import SettingsError
 from .processor import ProcessingSettings, RadarProcessor
 
 __all__ = ["SignMatch", "match_sign_convention"]
@@ -72,8 +73,8 @@ def match_sign_convention(calib: RadarCalib, adc_frames: Sequence[np.ndarray],
     SignMatch
     """
     if len(adc_frames) != len(reference_clouds):
-        raise ValueError(f"{len(adc_frames)} ADC frames but {len(reference_clouds)} reference "
-                         "point clouds; give one cloud per frame")
+        raise SettingsError(f"{len(adc_frames)} ADC frames but {len(reference_clouds)} reference "
+                            "point clouds; give one cloud per frame")
     trees = [cKDTree(np.asarray(c, dtype=np.float64)[:, :3]) if len(c) else None
              for c in reference_clouds]
     scores: dict[tuple[int, int], float] = {}

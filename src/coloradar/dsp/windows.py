@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import get_window
 
+from ..errors import SettingsError
+
 __all__ = ["WINDOWS", "coherent_window", "window"]
 
 WINDOWS = ("hann", "blackman", "none")
@@ -32,7 +34,7 @@ def window(name: str, n: int) -> np.ndarray:
         float64 ``(n,)``.
     """
     if name not in WINDOWS:
-        raise ValueError(f"unknown window {name!r}; expected one of {', '.join(WINDOWS)}")
+        raise SettingsError(f"unknown window {name!r}; expected one of {', '.join(WINDOWS)}")
     if name == "none":
         return np.ones(n)
     return get_window(name, n, fftbins=True).astype(np.float64)

@@ -6,10 +6,10 @@ import os
 import tempfile
 from pathlib import Path
 
-from ..errors import OutputExistsError
+from ..errors import ColoradarError, OutputExistsError, WriteError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode", "new_output_path",
-           "write_text_if_changed"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode", "make_output_dir",
+           "new_output_path", "write_text_if_changed"]
 
 
 def _read_umask() -> int:
@@ -36,19 +36,51 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes | memoryview) -
     that an interrupted write is recognisable and ignored by readers.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.chmod(tmp, default_file_mode())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError) and not isinstance(exc, ColoradarError):
+            raise _write_error(path, exc) from None
         raise
+
+
+def _write_error(path: Path, exc: OSError) -> WriteError:
+    """A :class:`~coloradar.WriteError` naming ``path`` and why it could not be written."""
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        why = "a folder on its path is a file"
+    else:
+        why = str(exc.strerror or exc)
+    return WriteError(f"{path}: cannot write ({why})")
+
+
+def make_output_dir(path: str | os.PathLike[str]) -> Path:
+    """Create the output folder ``path`` (and its parents) if needed.
+
+    Raises
+    ------
+    WriteError
+        When ``path`` (or a parent) is a file, or it cannot be created.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise WriteError(f"{path}: expected an output folder, found a file")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
+    return path
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
@@ -62,8 +94,8 @@ def write_text_if_changed(path: str | os.PathLike[str], text: str) -> bool:
     try:
         if Path(path).read_text(encoding="utf-8") == text:
             return False
-    except FileNotFoundError:
-        pass
+    except (OSError, UnicodeDecodeError):
+        pass  # absent or unreadable: written below (which names the path if it fails)
     atomic_write_text(path, text)
     return True
 

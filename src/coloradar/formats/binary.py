@@ -7,12 +7,12 @@ and zips share one code path; ``read_*`` helpers read a path directly.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError
+from ..errors import FormatError, SettingsError
 from .atomic import atomic_write_bytes
+from .source import read_file_bytes
 
 __all__ = [
     "adc_nbytes",
@@ -84,7 +84,7 @@ def encode_adc(adc: np.ndarray) -> bytes:
     """Encode a complex ``(tx, rx, chirp, sample)`` frame as int16 I/Q (values rounded, clipped)."""
     adc = np.asarray(adc)
     if adc.ndim != 4 or not np.iscomplexobj(adc):
-        raise ValueError(f"expected a complex (tx, rx, chirp, sample) array, got {adc.dtype} {adc.shape}")
+        raise SettingsError(f"expected a complex (tx, rx, chirp, sample) array, got {adc.dtype} {adc.shape}")
     iq = np.empty((*adc.shape, 2), dtype=np.float32)
     iq[..., 0] = adc.real
     iq[..., 1] = adc.imag
@@ -105,7 +105,7 @@ def encode_heatmap(heatmap: np.ndarray) -> bytes:
     """Encode a float ``(el, az, range, 2)`` heatmap."""
     heatmap = np.asarray(heatmap)
     if heatmap.ndim != 4 or heatmap.shape[-1] != 2:
-        raise ValueError(f"expected an (el, az, range, 2) array, got shape {heatmap.shape}")
+        raise SettingsError(f"expected an (el, az, range, 2) array, got shape {heatmap.shape}")
     return np.ascontiguousarray(heatmap, dtype="<f4").tobytes()
 
 
@@ -133,12 +133,12 @@ def encode_pointcloud(points: np.ndarray, ncols: int) -> bytes:
     """Encode an ``(N, ncols)`` point cloud as float32 rows."""
     points = np.asarray(points)
     if points.ndim != 2 or points.shape[1] != ncols:
-        raise ValueError(f"expected an (N, {ncols}) array, got shape {points.shape}")
+        raise SettingsError(f"expected an (N, {ncols}) array, got shape {points.shape}")
     return np.ascontiguousarray(points, dtype="<f4").tobytes()
 
 
 def _read(path: str | os.PathLike[str]) -> bytes:
-    return Path(path).read_bytes()
+    return read_file_bytes(path)
 
 
 def read_adc(path: str | os.PathLike[str], shape: tuple[int, int, int, int]) -> np.ndarray:

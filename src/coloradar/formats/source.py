@@ -8,14 +8,94 @@ root (``"cascade/adc_samples/timestamps.txt"``), whatever the zip's own top fold
 from __future__ import annotations
 
 import os
+import stat
 import threading
 import zipfile
 from collections.abc import Iterable
 from pathlib import Path, PurePosixPath
 
-from ..errors import FormatError, MissingDataError
+from ..errors import FormatError, MissingDataError, ReadError
 
-__all__ = ["FolderSource", "Source", "ZipSource", "open_source"]
+__all__ = ["FolderSource", "Source", "ZipSource", "check_regular_file", "open_source",
+           "read_file_bytes", "read_file_text"]
+
+_KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+          (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"))
+
+
+def _not_regular(path: Path, mode: int) -> ReadError:
+    kind = next((what for test, what in _KINDS if test(mode)), "not a regular file")
+    return ReadError(f"{path}: expected a regular file, found {kind}")
+
+
+def check_regular_file(path: str | os.PathLike[str]) -> int:
+    """The size of ``path`` in bytes, after checking that it is a regular file.
+
+    Raises
+    ------
+    MissingDataError
+        When ``path`` does not exist.
+    ReadError
+        When it is not a regular file (a FIFO would block a reader forever) or cannot be
+        examined.
+    """
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise MissingDataError(f"{p}: file not found") from None
+    except OSError as exc:
+        raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise _not_regular(p, st.st_mode)
+    return st.st_size
+
+
+def read_file_bytes(path: str | os.PathLike[str]) -> bytes:
+    """The whole content of the regular file ``path``.
+
+    The file is opened without blocking and checked on the open descriptor, so that a FIFO or
+    a device put in place of a data file is refused at once instead of hanging the reader.
+
+    Raises
+    ------
+    MissingDataError
+        When ``path`` does not exist.
+    ReadError
+        When it is not a regular file or cannot be read (permissions, I/O error).
+    """
+    p = Path(path)
+    try:
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except FileNotFoundError:
+        raise MissingDataError(f"{p}: file not found") from None
+    except IsADirectoryError:
+        raise ReadError(f"{p}: expected a regular file, found a folder") from None
+    except OSError as exc:
+        raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise _not_regular(p, mode)
+        with os.fdopen(fd, "rb") as f:
+            fd = -1
+            return f.read()
+    except OSError as exc:
+        if isinstance(exc, ReadError):
+            raise
+        raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    finally:
+        if fd >= 0:
+            os.close(fd)
+
+
+def read_file_text(path: str | os.PathLike[str]) -> str:
+    """:func:`read_file_bytes` decoded as UTF-8; :class:`FormatError` when it is not text."""
+    try:
+        return read_file_bytes(path).decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"{path}: expected a UTF-8 text file ({exc})") from None
 
 
 class Source:
@@ -55,6 +135,12 @@ class Source:
         """A human-readable name of file ``rel`` for error messages."""
         raise NotImplementedError
 
+    def version_key(self, rel: str) -> str:
+        """A short text that changes whenever file ``rel`` is rewritten (size and modification
+        time; for zip members size, CRC and date), without reading it: what a resumable job
+        compares to tell whether an input changed since its output was made."""
+        raise NotImplementedError
+
     def sub(self, rel: str) -> Source:
         """The source rooted at sub-folder ``rel``."""
         raise NotImplementedError
@@ -83,18 +169,20 @@ class FolderSource(Source):
         return sorted(os.listdir(p))
 
     def read_bytes(self, rel: str) -> bytes:
-        p = self._p(rel)
-        try:
-            with open(p, "rb") as f:
-                return f.read()
-        except FileNotFoundError:
-            raise MissingDataError(f"{p}: file not found") from None
+        return read_file_bytes(self._p(rel))
 
     def file_size(self, rel: str) -> int:
+        return check_regular_file(self._p(rel))
+
+    def version_key(self, rel: str) -> str:
+        p = self._p(rel)
         try:
-            return self._p(rel).stat().st_size
+            st = os.stat(p)
         except FileNotFoundError:
-            raise MissingDataError(f"{self._p(rel)}: file not found") from None
+            raise MissingDataError(f"{p}: file not found") from None
+        except OSError as exc:
+            raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+        return f"{st.st_size}:{st.st_mtime_ns}"
 
     def describe(self, rel: str) -> str:
         return str(self._p(rel))
@@ -124,6 +212,7 @@ class _ZipIndex:
         except (zipfile.BadZipFile, OSError) as exc:
             raise FormatError(f"{path}: expected a readable zip archive ({exc})") from None
         self.sizes: dict[str, int] = {}
+        self.versions: dict[str, str] = {}
         self.dirs: dict[str, set[str]] = {"": set()}
         for info in infos:
             name = info.filename.rstrip("/")
@@ -137,6 +226,7 @@ class _ZipIndex:
                 self.dirs.setdefault(name, set())
             else:
                 self.sizes[name] = info.file_size
+                self.versions[name] = f"{info.file_size}:{info.CRC:08x}:{info.date_time}"
 
     def read(self, name: str) -> bytes:
         with self._lock:
@@ -200,6 +290,12 @@ class ZipSource(Source):
     def describe(self, rel: str) -> str:
         return f"{self.archive}:{self._n(rel)}"
 
+    def version_key(self, rel: str) -> str:
+        n = self._n(rel)
+        if n not in self._index.versions:
+            raise MissingDataError(f"{self.describe(rel)}: file not found in archive")
+        return self._index.versions[n]
+
     def sub(self, rel: str) -> ZipSource:
         return ZipSource(self.archive, self._n(rel), _index=self._index)
 
@@ -225,6 +321,7 @@ def open_source(path: str | os.PathLike[str], markers: Iterable[str] = ()) -> So
         return FolderSource(p)
     if not p.exists():
         raise MissingDataError(f"{p}: no such folder or zip file")
+    check_regular_file(p)  # zipfile would block on a FIFO
     if not zipfile.is_zipfile(p):
         raise FormatError(f"{p}: expected a folder or a zip archive")
     src = ZipSource(p)

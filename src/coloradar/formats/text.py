@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 
-from ..errors import FormatError
+from ..errors import FormatError, SettingsError
 from .atomic import atomic_write_text
 
 __all__ = [
@@ -82,7 +82,7 @@ def format_timestamps(t: np.ndarray) -> str:
 def _format_rows(a: np.ndarray, ncols: int) -> str:
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != ncols:
-        raise ValueError(f"expected an (N, {ncols}) array, got shape {a.shape}")
+        raise SettingsError(f"expected an (N, {ncols}) array, got shape {a.shape}")
     return "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in a)
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError
+from ..errors import FormatError, SettingsError
 from ..formats.atomic import atomic_write_bytes, new_output_path
 
 __all__ = ["default_fields", "read_pcd", "read_ply", "read_point_file", "write_pcd",
@@ -42,10 +42,10 @@ def _prepare(path: str | os.PathLike[str], points: np.ndarray,
     path = new_output_path(path, overwrite)
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] < 3:
-        raise ValueError(f"expected points of shape (N, C>=3), got {p.shape}")
+        raise SettingsError(f"expected points of shape (N, C>=3), got {p.shape}")
     names = tuple(fields) if fields is not None else default_fields(p.shape[1])
     if len(names) != p.shape[1] or any(not n or any(c.isspace() for c in n) for n in names):
-        raise ValueError(f"need {p.shape[1]} field names without spaces, got {names}")
+        raise SettingsError(f"need {p.shape[1]} field names without spaces, got {names}")
     return path, np.ascontiguousarray(p, dtype="<f4"), names
 
 

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import MissingDataError
+from ..errors import MissingDataError, SettingsError
+from ..formats.layout import LAYOUTS
 from .frames import sensor_to_base
 from .se3 import SE3
 from .timesync import window_indices
@@ -16,9 +17,10 @@ from .trajectory import Trajectory, trajectory_from_groundtruth
 __all__ = ["MAP_SOURCES", "PointMap", "accumulate_clouds", "build_map",
            "voxel_downsample"]
 
-MAP_SOURCES = {"lidar": ("lidar", "pointclouds"), "single_chip": ("single_chip", "pointclouds"),
-               "cascade": ("cascade", "pointclouds")}
-"""Sensor name -> (sequence attribute, stream attribute) of the point-cloud streams."""
+MAP_SOURCES = {s.sensor: s.name for lay in LAYOUTS.values() for s in lay.frames.values()
+               if s.kind in ("lidar_points", "radar_points")}
+"""Sensor name -> its point-cloud stream (:mod:`coloradar.formats.layout`): ``lidar``,
+``cascade``, ``single_chip``."""
 
 
 def voxel_downsample(points: np.ndarray, voxel_size: float,
@@ -42,9 +44,9 @@ def voxel_downsample(points: np.ndarray, voxel_size: float,
     """
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] < 3:
-        raise ValueError(f"expected points of shape (N, C>=3), got {p.shape}")
+        raise SettingsError(f"expected points of shape (N, C>=3), got {p.shape}")
     if not voxel_size > 0:
-        raise ValueError(f"voxel_size must be positive, got {voxel_size}")
+        raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
     finite = np.all(np.isfinite(p[:, :3]), axis=1)
     p = p[finite]
     if p.shape[0] == 0:
@@ -61,7 +63,7 @@ def voxel_downsample(points: np.ndarray, voxel_size: float,
     if reduce == "first":
         return p[first].copy()
     if reduce != "mean":
-        raise ValueError(f"reduce must be 'mean' or 'first', got {reduce!r}")
+        raise SettingsError(f"reduce must be 'mean' or 'first', got {reduce!r}")
     m = first.size
     counts = np.bincount(inverse, minlength=m).astype(np.float64)
     out = np.empty((m, p.shape[1]), dtype=p.dtype)
@@ -70,7 +72,7 @@ def voxel_downsample(points: np.ndarray, voxel_size: float,
     return out
 
 
-def accumulate_clouds(clouds: Iterable[np.ndarray], poses: Iterable[SE3],
+def accumulate_clouds(clouds: Iterable[np.ndarray | None], poses: Iterable[SE3],
                       voxel_size: float | None = None, max_range: float | None = None,
                       min_range: float = 0.0) -> np.ndarray:
     """Move each cloud with its pose and stack them, optionally down-sampling.
@@ -78,7 +80,7 @@ def accumulate_clouds(clouds: Iterable[np.ndarray], poses: Iterable[SE3],
     Parameters
     ----------
     clouds
-        Iterable of float ``(N_i, C)`` clouds, sensor frame.
+        Iterable of float ``(N_i, C)`` clouds, sensor frame (None: a frame left out).
     poses
         ``world_T_sensor`` of each cloud.
     voxel_size
@@ -96,6 +98,8 @@ def accumulate_clouds(clouds: Iterable[np.ndarray], poses: Iterable[SE3],
     """
     parts = []
     for cloud, pose in zip(clouds, poses, strict=True):
+        if cloud is None:  # a frame that could not be read (reported where it was read)
+            continue
         c = np.asarray(cloud, dtype=np.float32)
         r = np.linalg.norm(c[:, :3], axis=1)
         keep = r >= min_range
@@ -164,10 +168,14 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
     if sensor not in MAP_SOURCES:
         raise MissingDataError(f"no point clouds for {sensor!r}; expected one of "
                                f"{', '.join(MAP_SOURCES)}")
-    group, attr = MAP_SOURCES[sensor]
-    stream = getattr(getattr(seq, group, None), attr, None)
-    if stream is None:
-        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {group}/{attr} stream")
+    name = MAP_SOURCES[sensor]
+    if name not in seq.available():
+        hint = (" (radar point clouds that coloradar process wrote are read with "
+                "open_sequence(run, products=OUT), --products OUT)"
+                if sensor != "lidar" else "")
+        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {name} stream in this run "
+                               f"(present: {', '.join(seq.available()) or 'nothing'}){hint}")
+    stream = seq.stream(name)
     traj = trajectory if trajectory is not None else trajectory_from_groundtruth(seq)
     t0 = traj.start + start
     t1 = None if duration is None else t0 + duration
@@ -182,13 +190,18 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
     poses = traj.interpolate_arrays(ts[idx])
     world = [SE3(poses[1][k], poses[0][k]) @ mount for k in range(idx.size)]
 
+    used = np.ones(idx.size, dtype=bool)
+
     def clouds():
         for k, i in enumerate(idx):
-            yield stream[int(i)]
+            # A bad frame is reported (DataWarning) and left out, like `coloradar process` does.
+            cloud = stream.read_or_skip(int(i))
+            used[k] = cloud is not None
+            yield cloud
             if progress is not None:
                 progress(k + 1, idx.size)
 
     pts = accumulate_clouds(clouds(), world, voxel_size, max_range, min_range)
     from .cloud_io import default_fields
 
-    return PointMap(pts, default_fields(pts.shape[1]), sensor, idx, ts[idx])
+    return PointMap(pts, default_fields(pts.shape[1]), sensor, idx[used], ts[idx[used]])

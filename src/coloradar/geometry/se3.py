@@ -9,12 +9,13 @@ Composition chains the inner names: ``world_T_sensor = world_T_base @ base_T_sen
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .._arrays import readonly
+from ..errors import SettingsError
 
 if TYPE_CHECKING:
     from ..calib import Extrinsic
@@ -51,7 +52,7 @@ def transform_points(rotation: np.ndarray, translation: np.ndarray,
     dtype = p.dtype if p.dtype in (np.float32, np.float64) else np.float64
     p = p.astype(dtype, copy=False)
     if p.shape[-1] != 3:
-        raise ValueError(f"expected points of shape (N, 3) or (3,), got {p.shape}")
+        raise SettingsError(f"expected points of shape (N, 3) or (3,), got {p.shape}")
     return p @ rotation.T.astype(dtype) + translation.astype(dtype)
 
 
@@ -77,10 +78,10 @@ class SE3:
 
     def __post_init__(self) -> None:
         if not isinstance(self.rotation, Rotation) or not self.rotation.single:
-            raise ValueError("SE3.rotation must be a single scipy Rotation")
+            raise SettingsError("SE3.rotation must be a single scipy Rotation")
         t = np.array(self.translation, dtype=np.float64).reshape(-1)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise ValueError(f"SE3.translation must be 3 finite numbers, got {t!r}")
+            raise SettingsError(f"SE3.translation must be 3 finite numbers, got {t!r}")
         object.__setattr__(self, "translation", readonly(t))
 
     # -- construction -------------------------------------------------------------------------
@@ -94,7 +95,7 @@ class SE3:
         """From a 4x4 homogeneous matrix (the rotation block is orthonormalised by scipy)."""
         m = np.asarray(matrix, dtype=np.float64)
         if m.shape != (4, 4) or not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0]):
-            raise ValueError(f"expected a 4x4 homogeneous matrix, got shape {m.shape}")
+            raise SettingsError(f"expected a 4x4 homogeneous matrix, got shape {m.shape}")
         return cls(Rotation.from_matrix(m[:3, :3]), m[:3, 3])
 
     @classmethod
@@ -102,7 +103,7 @@ class SE3:
         """From a pose row ``x y z qx qy qz qw`` (the dataset's pose files)."""
         p = np.asarray(pose, dtype=np.float64).reshape(-1)
         if p.shape != (7,):
-            raise ValueError(f"expected a pose row of 7 values (x y z qx qy qz qw), got {p.size}")
+            raise SettingsError(f"expected a pose row of 7 values (x y z qx qy qz qw), got {p.size}")
         return cls(Rotation.from_quat(p[3:]), p[:3])
 
     @classmethod
@@ -128,6 +129,10 @@ class SE3:
         inv = self.rotation.inv()
         return SE3(inv, -rotate(inv, self.translation))
 
+    @overload
+    def __matmul__(self, other: SE3) -> SE3: ...
+    @overload
+    def __matmul__(self, other: Trajectory) -> Trajectory: ...
     def __matmul__(self, other: SE3 | Trajectory) -> SE3 | Trajectory:
         """``a_T_c = a_T_b @ b_T_c``; with a :class:`Trajectory` on the right, every pose."""
         if isinstance(other, SE3):
@@ -157,7 +162,7 @@ class SE3:
         """
         c = np.asarray(cloud)
         if c.ndim != 2 or c.shape[1] < 3:
-            raise ValueError(f"expected a point cloud of shape (N, C>=3), got {c.shape}")
+            raise SettingsError(f"expected a point cloud of shape (N, C>=3), got {c.shape}")
         out = np.array(c, dtype=c.dtype if c.dtype in (np.float32, np.float64) else np.float64)
         out[:, :3] = self.apply(out[:, :3])
         return out

@@ -11,12 +11,13 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
+from typing import overload
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from .._arrays import readonly
-from ..errors import DataWarning, ExtrapolationError, FormatError
+from ..errors import DataWarning, ExtrapolationError, FormatError, SettingsError
 from .se3 import SE3, rotate
 
 __all__ = ["ExtrapolationError", "Trajectory", "trajectory_from_groundtruth"]
@@ -50,8 +51,8 @@ class Trajectory:
         if r.single:
             r = Rotation.concatenate([r])
         if p.shape != (t.size, 3) or len(r) != t.size:
-            raise ValueError(f"{self.name}: {t.size} timestamps, translations {p.shape}, "
-                             f"{len(r)} rotations")
+            raise SettingsError(f"{self.name}: {t.size} timestamps, translations {p.shape}, "
+                                f"{len(r)} rotations")
         if t.size == 0:
             raise FormatError(f"{self.name}: a trajectory needs at least one pose")
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p))):
@@ -115,7 +116,11 @@ class Trajectory:
     def __len__(self) -> int:
         return int(self.timestamps.size)
 
-    def __getitem__(self, key: int | slice | np.ndarray) -> SE3 | Trajectory:
+    @overload
+    def __getitem__(self, key: int | np.integer) -> SE3: ...
+    @overload
+    def __getitem__(self, key: slice | np.ndarray) -> Trajectory: ...
+    def __getitem__(self, key: int | np.integer | slice | np.ndarray) -> SE3 | Trajectory:
         """An int gives the :class:`SE3` pose at that knot; a slice or index array a Trajectory."""
         if isinstance(key, (int, np.integer)):
             return SE3(self.rotations[int(key)], self.translations[int(key)])
@@ -185,7 +190,7 @@ class Trajectory:
         """
         p = np.asarray(points, dtype=np.float64)
         if p.shape != (len(self), 3):
-            raise ValueError(f"expected ({len(self)}, 3) points, one per pose, got {p.shape}")
+            raise SettingsError(f"expected ({len(self)}, 3) points, one per pose, got {p.shape}")
         return rotate(self.rotations, p) + self.translations
 
     # -- interpolation ------------------------------------------------------------------------
@@ -239,8 +244,8 @@ class Trajectory:
         """
         t = np.asarray(times, dtype=np.float64).reshape(-1)
         if np.any(np.diff(t) <= 0):
-            raise ValueError("interpolate: times must be strictly increasing; use "
-                             "interpolate_arrays for times in any order")
+            raise SettingsError("interpolate: times must be strictly increasing; use "
+                                "interpolate_arrays for times in any order")
         trans, rot = self.interpolate_arrays(t, tolerance)
         return Trajectory(t, trans, rot, self.name)
 

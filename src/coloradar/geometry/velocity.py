@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..calib import Calibration
-from ..errors import ColoradarError
+from ..errors import ColoradarError, SettingsError
 from .frames import sensor_to_base
 from .se3 import SE3, rotate
 from .trajectory import Trajectory
@@ -85,7 +85,7 @@ def rig_velocity(trajectory: Trajectory, times: np.ndarray, *,
     """
     if mount is None:
         if sensor != "base" and calib is None:
-            raise ValueError("rig_velocity: give calib (or mount) for a sensor other than base")
+            raise SettingsError("rig_velocity: give calib (or mount) for a sensor other than base")
         mount = SE3.identity() if calib is None else sensor_to_base(calib, sensor)
         name = sensor
     else:
@@ -95,7 +95,7 @@ def rig_velocity(trajectory: Trajectory, times: np.ndarray, *,
     t = np.asarray(times, dtype=np.float64).reshape(-1)
     h = float(np.median(np.diff(trajectory.timestamps))) if half_window is None else half_window
     if not h > 0:
-        raise ValueError(f"rig_velocity: half_window must be positive, got {h}")
+        raise SettingsError(f"rig_velocity: half_window must be positive, got {h}")
     trajectory.check_span(t, 0.0)
     ta = np.maximum(t - h, trajectory.start)
     tb = np.minimum(t + h, trajectory.end)
@@ -110,8 +110,8 @@ def rig_velocity(trajectory: Trajectory, times: np.ndarray, *,
     if expressed_in == "world":
         return RigVelocity(t, rotate(rt, v_sensor_base), rotate(rt, w_base), "world")
     if expressed_in not in (None, name):
-        raise ValueError(f"rig_velocity: expressed_in must be None or 'world', got "
-                         f"{expressed_in!r}")
+        raise SettingsError(f"rig_velocity: expressed_in must be None or 'world', got "
+                            f"{expressed_in!r}")
     inv = mount.rotation.inv()
     return RigVelocity(t, rotate(inv, v_sensor_base), rotate(inv, w_base), name)
 

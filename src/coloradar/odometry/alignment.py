@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..errors import ColoradarError
+from ..errors import ColoradarError, SettingsError
 
 __all__ = ["Alignment", "umeyama_alignment"]
 
@@ -81,7 +81,7 @@ def umeyama_alignment(source: np.ndarray, target: np.ndarray, *,
     x = np.asarray(source, dtype=np.float64)
     y = np.asarray(target, dtype=np.float64)
     if x.shape != y.shape or x.ndim != 2 or x.shape[1] != 3:
-        raise ValueError(f"expected two (N, 3) arrays of equal shape, got {x.shape}, {y.shape}")
+        raise SettingsError(f"expected two (N, 3) arrays of equal shape, got {x.shape}, {y.shape}")
     if x.shape[0] < 2:
         raise ColoradarError(f"an alignment needs at least 2 corresponding positions, "
                              f"got {x.shape[0]}")

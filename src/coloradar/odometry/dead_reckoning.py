@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from ..calib import Calibration
-from ..errors import ColoradarError, DataWarning
+from ..errors import ColoradarError, DataWarning, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base
 from .velocity_track import EgoVelocityTrack
 
@@ -85,7 +85,7 @@ def integrate_gyro(timestamps: np.ndarray, angular_rates: np.ndarray, *,
     t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
     w = np.asarray(angular_rates, dtype=np.float64)
     if w.shape != (t.size, 3):
-        raise ValueError(f"expected ({t.size}, 3) angular rates, got {w.shape}")
+        raise SettingsError(f"expected ({t.size}, 3) angular rates, got {w.shape}")
     if t.size == 0:
         raise ColoradarError("integrate_gyro: no IMU samples")
     if np.any(np.diff(t) <= 0):
@@ -137,7 +137,7 @@ def dead_reckon(track: EgoVelocityTrack, world_R_base: Rotation, base_T_radar: S
     """
     m = len(track)
     if len(world_R_base) != m:
-        raise ValueError(f"{m} frames but {len(world_R_base)} attitudes")
+        raise SettingsError(f"{m} frames but {len(world_R_base)} attitudes")
     good = track.ok & np.all(np.isfinite(track.velocity), axis=1)
     if not good.any():
         raise ColoradarError(f"{track.frame}: no frame has a usable ego-velocity "
@@ -204,8 +204,8 @@ def radar_inertial_odometry(track: EgoVelocityTrack, calib: Calibration, *,
         outside it are dropped with a :class:`~coloradar.DataWarning`).
     """
     if orientation not in ORIENTATION_SOURCES:
-        raise ValueError(f"orientation must be one of {', '.join(ORIENTATION_SOURCES)}, "
-                         f"got {orientation!r}")
+        raise SettingsError(f"orientation must be one of {', '.join(ORIENTATION_SOURCES)}, "
+                            f"got {orientation!r}")
     radar = radar or track.frame
     base_T_radar = sensor_to_base(calib, radar)
     t = track.timestamps
@@ -235,6 +235,7 @@ def radar_inertial_odometry(track: EgoVelocityTrack, calib: Calibration, *,
         att = _attitude_from_gyro(sub.timestamps, imu_t, np.asarray(imu_rates, float),
                                   base_R_imu, initial_pose.rotation, gyro_bias)
     else:
+        assert groundtruth is not None  # checked above for this orientation
         att = groundtruth.interpolate_arrays(sub.timestamps)[1]
     return dead_reckon(sub, att, base_T_radar, initial_position=initial_pose.translation,
                        name=f"{radar} radar + {orientation} odometry")

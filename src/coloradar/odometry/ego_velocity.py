@@ -41,6 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SettingsError
+
 __all__ = ["EgoVelocity", "EgoVelocityConfig", "estimate_ego_velocity", "static_inlier_threshold"]
 
 
@@ -99,11 +101,11 @@ class EgoVelocityConfig:
 
     def __post_init__(self) -> None:
         if not self.threshold > 0:
-            raise ValueError(f"threshold must be positive, got {self.threshold}")
+            raise SettingsError(f"threshold must be positive, got {self.threshold}")
         if self.max_velocity is not None and not self.max_velocity > 0:
-            raise ValueError(f"max_velocity must be positive or None, got {self.max_velocity}")
+            raise SettingsError(f"max_velocity must be positive or None, got {self.max_velocity}")
         if self.hypotheses < 1 or self.max_models < 1 or self.min_inliers < 3:
-            raise ValueError("hypotheses and max_models must be >= 1, min_inliers >= 3")
+            raise SettingsError("hypotheses and max_models must be >= 1, min_inliers >= 3")
 
     @property
     def dims(self) -> int:
@@ -182,16 +184,16 @@ def _failed(n_in: int, n_valid: int, reason: str, n_models: int = 0) -> EgoVeloc
 def _split_cloud(points: np.ndarray, range_rates: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] < 3:
-        raise ValueError(f"expected points of shape (N, 3) or a cloud (N, 5), got {p.shape}")
+        raise SettingsError(f"expected points of shape (N, 3) or a cloud (N, 5), got {p.shape}")
     if range_rates is None:
         if p.shape[1] < 5:
-            raise ValueError(f"a cloud of shape {p.shape} has no range-rate column; expected "
-                             "(N, 5) x y z intensity range_rate, or pass range_rates")
+            raise SettingsError(f"a cloud of shape {p.shape} has no range-rate column; expected "
+                                "(N, 5) x y z intensity range_rate, or pass range_rates")
         vr = p[:, 4]
     else:
         vr = np.asarray(range_rates).reshape(-1)
         if vr.size != p.shape[0]:
-            raise ValueError(f"{p.shape[0]} points but {vr.size} range rates")
+            raise SettingsError(f"{p.shape[0]} points but {vr.size} range rates")
     return p[:, :3].astype(np.float64), vr.astype(np.float64)
 
 

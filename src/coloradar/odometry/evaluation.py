@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MissingDataError, OutputExistsError
+from ..errors import FormatError, MissingDataError, OutputExistsError
 from ..formats.atomic import atomic_write_text
+from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .metrics import (
     ATEResult,
@@ -143,8 +144,15 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
     folder = Path(folder)
     info: dict = {}
     info_path = folder / INFO_FILE
-    if info_path.is_file():
-        info = json.loads(info_path.read_text(encoding="utf-8"))
+    if info_path.exists():
+        try:
+            info = json.loads(read_file_text(info_path))
+        except json.JSONDecodeError as exc:
+            raise FormatError(f"{info_path}: expected the JSON object 'coloradar odometry' "
+                              f"writes ({exc})") from None
+        if not isinstance(info, dict):
+            raise FormatError(f"{info_path}: expected a JSON object, found "
+                              f"{type(info).__name__}")
     run = run if run is not None else info.get("run")
     if not run:
         raise MissingDataError(f"{folder}: no {INFO_FILE} naming the run; give the run "

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..calib import Calibration
-from ..errors import ColoradarError
+from ..errors import ColoradarError, SettingsError
 from ..geometry import Trajectory, rig_velocity
 from .alignment import Alignment, umeyama_alignment
 from .velocity_track import EgoVelocityTrack
@@ -173,7 +173,7 @@ def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
     ATEResult
     """
     if align not in ALIGNMENTS:
-        raise ValueError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
+        raise SettingsError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
     est, ref = associate_trajectories(estimate, reference, max_gap)
     if align in ("se3", "sim3"):
         al = umeyama_alignment(est.translations, ref.translations, with_scale=align == "sim3")
@@ -279,7 +279,7 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
     for d in distances:
         d = float(d)
         if not d > 0:
-            raise ValueError(f"RPE distances must be positive, got {d}")
+            raise SettingsError(f"RPE distances must be positive, got {d}")
         # First j with dist[j] >= dist[i] + d; a hair of slack so that exact multiples of the
         # pose spacing are not pushed one pose further by rounding of the cumulative sum.
         j = np.searchsorted(dist, dist + d - 1e-9 * max(1.0, d), side="left")

@@ -1,8 +1,9 @@
 """Run-level odometry: point clouds of a run -> ego-velocities -> trajectory, written to a folder.
 
-Point clouds come from one of three sources of a run:
+Point clouds come from one of three sources of a run, turned into points by
+:class:`coloradar.dsp.FramePoints` (the same converter the viewers use):
 
-- ``pointclouds``: the single-chip sensor's own point clouds (as shipped);
+- ``pointclouds``: the sensor's own point clouds (single chip as shipped, or ``process`` output);
 - ``adc``: raw ADC frames through :class:`coloradar.dsp.RadarProcessor` (either radar);
 - ``heatmaps``: heatmaps (shipped or computed) through :func:`coloradar.dsp.heatmap_pointcloud`
   with the calibration's heatmap grid.
@@ -24,6 +25,7 @@ import numpy as np
 
 from .. import __version__
 from ..calib import RadarCalib
+from ..dsp.points import POINT_SOURCES, default_point_source, radar_point_stream
 from ..errors import ColoradarError, MissingDataError, OutputExistsError
 from ..formats.atomic import atomic_write_text
 from ..geometry import Trajectory, trajectory_from_groundtruth, window_indices
@@ -46,7 +48,7 @@ __all__ = [
     "run_path",
 ]
 
-SOURCES = ("pointclouds", "adc", "heatmaps")
+SOURCES = POINT_SOURCES
 VELOCITY_FILE = "ego_velocity.csv"
 TRAJECTORY_FILE = "trajectory.txt"
 INFO_FILE = "odometry.json"
@@ -77,32 +79,14 @@ def ego_velocity_config(radar_calib: RadarCalib, **overrides) -> EgoVelocityConf
 
 def default_source(seq, radar: str) -> str:
     """The source used when none is named: the sensor's own point clouds when the run has them
-    (single chip), else ADC, else heatmaps."""
-    have = seq.available()
-    for src, key in (("pointclouds", "pointclouds"), ("adc", "adc"), ("heatmaps", "heatmaps")):
-        if f"{radar}/{key}" in have:
-            return src
-    raise MissingDataError(f"{seq.location}: the {radar} radar has no point clouds, ADC frames "
-                           f"or heatmaps in this run (present: {', '.join(have) or 'nothing'})")
-
-
-def _cloud_maker(seq, radar: str, source: str, processing: dict | None):
-    rs = seq.radar(radar)
-    if source == "pointclouds":
-        return rs.pointclouds, None
-    if source == "adc":
-        from ..dsp import RadarProcessor
-
-        proc = RadarProcessor(rs.calib, **(processing or {}))
-        return rs.adc, proc.pointcloud
-    if source == "heatmaps":
-        from ..dsp import heatmap_pointcloud
-
-        cfg = rs.calib.heatmap
-        opts = dict(processing or {})
-        opts.setdefault("min_range", 0.3)
-        return rs.heatmaps, lambda hm: heatmap_pointcloud(hm, cfg, **opts)
-    raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
+    (single chip), else ADC, else heatmaps (:func:`coloradar.dsp.default_point_source`)."""
+    src = default_point_source(seq, radar)
+    if src is None:
+        have = seq.available()
+        raise MissingDataError(f"{seq.location}: the {radar} radar has no point clouds, ADC "
+                               f"frames or heatmaps in this run (present: "
+                               f"{', '.join(have) or 'nothing'})")
+    return src
 
 
 def _frames(timestamps: np.ndarray, start: float | None, duration: float | None,
@@ -111,7 +95,7 @@ def _frames(timestamps: np.ndarray, start: float | None, duration: float | None,
         raise ColoradarError(f"stride must be >= 1, got {stride}")
     t0 = timestamps[0] if timestamps.size else 0.0
     lo = None if start is None else t0 + start
-    hi = None if duration is None else (t0 if start is None else lo) + duration
+    hi = None if duration is None else (t0 if lo is None else lo) + duration
     idx = window_indices(timestamps, lo, hi)[::stride]
     return idx if max_frames is None else idx[:max_frames]
 
@@ -150,19 +134,32 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
     EgoVelocityTrack
     """
     source = source or default_source(seq, radar)
-    stream, convert = _cloud_maker(seq, radar, source, processing)
+    if source not in SOURCES:
+        raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
+    stream, convert = radar_point_stream(seq, radar, source, processing=processing)
     idx = _frames(stream.timestamps, start, duration, stride, max_frames)
     if idx.size == 0:
         raise ColoradarError(f"{seq.name}: no {radar} {source} frames in the chosen window")
     cfg = config or ego_velocity_config(seq.calib.radar(radar))
 
-    def clouds() -> Iterator[np.ndarray]:
-        for k in idx:
-            frame = stream[int(k)]
-            yield frame if convert is None else convert(frame)
+    skipped: dict[int, str] = {}
 
-    return estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
-                                   frame=radar, progress=progress)
+    def clouds() -> Iterator[np.ndarray]:
+        for j, k in enumerate(idx):
+            frame = stream.read_or_skip(int(k))  # reported as a DataWarning
+            if frame is None:
+                # One bad frame gives no estimate for that frame, as `coloradar process`
+                # skips it; the track keeps its time so the trajectory bridges the gap.
+                skipped[j] = f"unreadable frame: {stream.path(int(k))}"
+                yield np.zeros((0, 5), dtype=np.float32)
+            else:
+                yield convert(frame)
+
+    track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
+                                    frame=radar, progress=progress)
+    for j, why in skipped.items():
+        track.reasons[j] = why
+    return track
 
 
 def run_path(seq) -> str:

@@ -13,13 +13,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import MissingDependencyError
 from ..formats.atomic import atomic_write_bytes, new_output_path
 
 try:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 except ImportError as exc:  # pragma: no cover - depends on the environment
-    raise ImportError("the odometry plot needs matplotlib: pip install 'coloradar[viz]'") from exc
+    raise MissingDependencyError("the odometry plot needs matplotlib: "
+                                 "pip install 'coloradar[viz]'") from exc
 
 if TYPE_CHECKING:
     from .evaluation import Evaluation

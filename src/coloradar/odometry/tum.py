@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ..errors import FormatError, MissingDataError
 from ..formats.atomic import atomic_write_text, new_output_path
+from ..formats.source import read_file_text
 from ..formats.text import parse_table
 from ..geometry import Trajectory
 
@@ -58,7 +59,7 @@ def read_tum(path: str | os.PathLike[str]) -> Trajectory:
     """Read a TUM trajectory file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+        text = read_file_text(path)
+    except MissingDataError:
         raise MissingDataError(f"{path}: trajectory file not found") from None
     return parse_tum(text, str(path))

@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError
+from ..errors import FormatError, MissingDataError, SettingsError
 from ..formats.atomic import atomic_write_text, new_output_path
+from ..formats.source import read_file_text
 from .ego_velocity import EgoVelocity, EgoVelocityConfig, estimate_ego_velocity
 
 __all__ = [
@@ -78,12 +79,12 @@ class EgoVelocityTrack:
                   "num_inliers": (m,), "sigma": (m,), "ok": (m,)}
         for name, shape in shapes.items():
             if np.shape(getattr(self, name)) != shape:
-                raise ValueError(f"EgoVelocityTrack.{name}: expected shape {shape}, "
-                                 f"got {np.shape(getattr(self, name))}")
+                raise SettingsError(f"EgoVelocityTrack.{name}: expected shape {shape}, "
+                                    f"got {np.shape(getattr(self, name))}")
         if not self.reasons and m:
             object.__setattr__(self, "reasons", [""] * m)
         if len(self.reasons) != m:
-            raise ValueError(f"EgoVelocityTrack: {m} frames but {len(self.reasons)} reasons")
+            raise SettingsError(f"EgoVelocityTrack: {m} frames but {len(self.reasons)} reasons")
 
     def __len__(self) -> int:
         return int(self.timestamps.size)
@@ -94,7 +95,7 @@ class EgoVelocityTrack:
         """Stack per-frame :class:`EgoVelocity` results."""
         t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
         if t.size != len(estimates):
-            raise ValueError(f"{t.size} timestamps but {len(estimates)} estimates")
+            raise SettingsError(f"{t.size} timestamps but {len(estimates)} estimates")
         m = len(estimates)
         return cls(
             t,
@@ -140,13 +141,13 @@ def estimate_ego_velocities(clouds: Iterable[np.ndarray], timestamps: np.ndarray
     out = []
     for k, cloud in enumerate(clouds):
         if k >= t.size:
-            raise ValueError(f"more clouds than the {t.size} timestamps")
+            raise SettingsError(f"more clouds than the {t.size} timestamps")
         rng = np.random.default_rng(np.random.SeedSequence([seed, k]))
         out.append(estimate_ego_velocity(cloud, config=config, rng=rng))
         if progress is not None:
             progress(k + 1, t.size)
     if len(out) != t.size:
-        raise ValueError(f"{t.size} timestamps but {len(out)} clouds")
+        raise SettingsError(f"{t.size} timestamps but {len(out)} clouds")
     return EgoVelocityTrack.from_estimates(t, out, frame)
 
 
@@ -220,9 +221,7 @@ def read_velocity_table(path: str | os.PathLike[str]) -> EgoVelocityTrack:
     """Read an ``ego_velocity.csv`` table."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        from ..errors import MissingDataError
-
+        text = read_file_text(path)
+    except MissingDataError:
         raise MissingDataError(f"{path}: ego-velocity table not found") from None
     return parse_velocity_table(text, str(path))

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import SettingsError
+
 __all__ = ["EllipsePath", "LinePath", "Path", "PathSample", "Sinusoids", "path_from_dict"]
 
 
@@ -32,7 +34,7 @@ class Sinusoids:
         for name in ("amplitude", "frequency", "phase"):
             object.__setattr__(self, name, np.atleast_1d(np.asarray(getattr(self, name), float)))
         if not (self.amplitude.shape == self.frequency.shape == self.phase.shape):
-            raise ValueError("Sinusoids: amplitude, frequency and phase must have the same length")
+            raise SettingsError("Sinusoids: amplitude, frequency and phase must have the same length")
 
     def derivative(self, t: np.ndarray, order: int = 0) -> np.ndarray:
         """The ``order``-th time derivative at times ``t`` (float64, shape of ``t``)."""
@@ -118,7 +120,7 @@ class EllipsePath(Path):
         object.__setattr__(self, "center", np.asarray(self.center, dtype=np.float64).reshape(3))
         a, b = (float(r) for r in self.radii)
         if a <= 0 or b <= 0 or self.speed < 0 or self.ramp < 0:
-            raise ValueError("EllipsePath: radii must be positive, speed and ramp not negative")
+            raise SettingsError("EllipsePath: radii must be positive, speed and ramp not negative")
         object.__setattr__(self, "radii", (a, b))
 
     def _theta(self, t: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -203,7 +205,7 @@ class LinePath(Path):
         object.__setattr__(self, "start", np.asarray(self.start, dtype=np.float64).reshape(3))
         object.__setattr__(self, "end", np.asarray(self.end, dtype=np.float64).reshape(3))
         if self.speed < 0:
-            raise ValueError("LinePath: speed must not be negative")
+            raise SettingsError("LinePath: speed must not be negative")
 
     def sample(self, t: np.ndarray) -> PathSample:
         """Evaluate at times ``t`` [s]."""
@@ -248,5 +250,5 @@ def path_from_dict(d: dict, where: str = "path") -> Path:
             return LinePath(d["start"], d.get("end", d["start"]), float(d.get("speed", 0.0)),
                             np.radians(float(d.get("phase_deg", 0.0))))
     except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{where}: {exc}") from None
-    raise ValueError(f"{where}: unknown path type {kind!r}; expected 'ellipse' or 'line'")
+        raise SettingsError(f"{where}: {exc}") from None
+    raise SettingsError(f"{where}: unknown path type {kind!r}; expected 'ellipse' or 'line'")

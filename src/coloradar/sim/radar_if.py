@@ -23,6 +23,7 @@ import numpy as np
 
 from ..calib import PhaseFrequencyCalib, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
+from ..errors import SettingsError
 
 __all__ = ["apply_channel_errors", "slow_times", "synthesize_adc"]
 
@@ -95,7 +96,7 @@ def synthesize_adc(
         complex64 ``(tx, rx, chirp, sample)`` in ADC counts.
     """
     if precision not in ("double", "single"):
-        raise ValueError(f"precision must be 'double' or 'single', got {precision!r}")
+        raise SettingsError(f"precision must be 'double' or 'single', got {precision!r}")
     dtype = np.complex128 if precision == "double" else np.complex64
     w, ant = calib.waveform, calib.antenna
     p = np.atleast_2d(np.asarray(positions, dtype=np.float64)).reshape(-1, 3)
@@ -117,7 +118,7 @@ def synthesize_adc(
         m = len(pk)
         r = np.linalg.norm(pk, axis=1)
         if np.any(r <= 0):
-            raise ValueError("a scatterer lies at the radar's origin")
+            raise SettingsError("a scatterer lies at the radar's origin")
         u = pk / r[:, None]
         vr = np.einsum("ij,ij->i", u, vk)
         tau0 = 2.0 * r / SPEED_OF_LIGHT

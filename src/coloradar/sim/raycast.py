@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SettingsError
+
 __all__ = ["RectArrays", "cast_rays"]
 
 
@@ -118,7 +120,7 @@ def cast_rays(origins: np.ndarray, directions: np.ndarray, rects: RectArrays,
         return dist, index
     static = rects.center.shape[0] == 1
     if method == "sectors" and not static:
-        raise ValueError("cast_rays: the sector method needs static rectangles")
+        raise SettingsError("cast_rays: the sector method needs static rectangles")
     if method == "sectors" or (method == "auto" and static and d.size // 3 >= 512
                                and rects.count >= 8):
         oo = np.broadcast_to(o, d.shape).reshape(-1, 3)

@@ -1,6 +1,7 @@
 """Write a complete simulated ColoRadar run: ``OUT/calib`` and ``OUT/<run name>``.
 
-The run has the dataset's layout (DESIGN.md §1), frames numbered from 0, every file written
+The run has the dataset's layout (``docs/layout.md``; ColoRadar by default, ColoRadar+ on
+request), frames numbered from 0 (ColoRadar+: 1), every file written
 atomically, the run folder itself assembled as ``OUT/.<name>.partial`` and renamed into place
 at the end (an interrupted simulation leaves no half run behind). Streams and rates:
 
@@ -28,6 +29,7 @@ one ``calib`` folder, as the real dataset's runs do.
 from __future__ import annotations
 
 import datetime
+import functools
 import json
 import os
 import shutil
@@ -56,7 +58,7 @@ from ..calib import (
     preset_radar,
     write_calibration,
 )
-from ..errors import ColoradarError, OutputExistsError
+from ..errors import ColoradarError, MissingDataError, OutputExistsError
 from ..formats import (
     atomic_write_text,
     decode_adc,
@@ -69,6 +71,7 @@ from ..formats import (
     write_timestamps,
 )
 from ..formats.atomic import atomic_write_bytes
+from ..formats.layout import COLORADAR, RunLayout, get_layout
 from .imu import ImuModel, simulate_imu
 from .lidar import LidarModel, simulate_scan
 from .radar import (
@@ -164,7 +167,7 @@ def run_name(scene: str, seed: int, start_time: float = DEFAULT_START_TIME) -> s
 def heatmap_processor(radar_calib: RadarCalib):
     """A ``coloradar.dsp.RadarProcessor`` for the radar, or None when dsp is not available."""
     try:
-        from ..dsp import RadarProcessor  # type: ignore[attr-defined]
+        from ..dsp import RadarProcessor
     except ImportError:
         return None
     proc = RadarProcessor(radar_calib)
@@ -204,9 +207,10 @@ def simulated_calibration(board_seed: int = 2021, true_angles: bool = True
     return calib, coupling_adc
 
 
-def _calib_texts(calib: Calibration) -> dict[str, str]:
+def _calib_texts(calib: Calibration, layout: RunLayout = COLORADAR) -> dict[str, str]:
+    """Every file of the calib folder of ``layout`` (as :func:`write_calibration` writes it)."""
     out = {}
-    for name in RADARS:
+    for name in layout.calib_radars:
         rc = calib.radar(name)
         out[f"{name}/waveform_cfg.txt"] = format_waveform_cfg(rc.waveform)
         out[f"{name}/antenna_cfg.txt"] = format_antenna_cfg(rc.antenna, f"{name} layout")
@@ -217,7 +221,9 @@ def _calib_texts(calib: Calibration) -> dict[str, str]:
             out[f"{name}/phase_frequency_calib.txt"] = format_phase_frequency_calib(
                 rc.phase_frequency)
     for sensor, ext in calib.transforms.items():
-        out[f"transforms/base_to_{sensor}.txt"] = format_transform(ext)
+        if layout is COLORADAR or sensor in layout.transforms:
+            fname = layout.transforms.get(sensor, f"base_to_{sensor}.txt")
+            out[f"transforms/{fname}"] = format_transform(ext)
     return out
 
 
@@ -225,13 +231,14 @@ SIM_CALIB_MARKER = "SIMULATED_CALIBRATION.txt"
 """File that marks a calib folder as written by the simulator (the only kind it may replace)."""
 
 
-def _write_calib(calib: Calibration, folder: Path, overwrite: bool) -> None:
+def _write_calib(calib: Calibration, folder: Path, overwrite: bool,
+                 layout: RunLayout = COLORADAR) -> None:
     """Write the calib folder, or check that the one there is the same.
 
     A calib folder that the simulator did not write (a real dataset's, say) is never replaced,
     whatever ``overwrite`` says.
     """
-    texts = _calib_texts(calib)
+    texts = _calib_texts(calib, layout)
     if folder.exists():
         differ = [rel for rel, text in texts.items()
                   if not (folder / rel).is_file()
@@ -248,7 +255,7 @@ def _write_calib(calib: Calibration, folder: Path, overwrite: bool) -> None:
                 f"{folder}: a calib folder is there that differs from this simulation's "
                 f"({', '.join(differ[:3])}{'…' if len(differ) > 3 else ''}); pass "
                 "overwrite=True (--overwrite) to replace it, or write to another folder")
-    write_calibration(calib, folder)
+    write_calibration(calib, folder, layout=layout)
     atomic_write_text(folder / SIM_CALIB_MARKER,
                       "written by coloradar simulate: simulated sensors, not a real rig's calibration\n")
 
@@ -290,10 +297,11 @@ class _Context:
 
     def __init__(self, scene: Scene, traj: RigTrajectory, calib: Calibration,
                  coupling_adc: dict[str, np.ndarray], seed: int, start_time: float,
-                 root: Path, progress: Progress | None, heatmaps: bool):
+                 root: Path, progress: Progress | None, heatmaps: bool,
+                 layout: RunLayout = COLORADAR):
         self.scene, self.traj, self.calib = scene, traj, calib
         self.coupling_adc, self.seed, self.start_time = coupling_adc, seed, start_time
-        self.root, self.heatmaps = root, heatmaps
+        self.root, self.heatmaps, self.layout = root, heatmaps, layout
         self._progress = progress
         self._lock = threading.Lock()
 
@@ -312,7 +320,11 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
     base_T_s = ctx.calib.transforms[radar].matrix()
     state = ctx.traj.state(times)
     proc = heatmap_processor(calib) if ctx.heatmaps else None
-    adc_dir = ctx.root / radar / "adc_samples"
+    lay = ctx.layout
+    streams = lay.radar_streams(radar)
+    first = lay.first_frame
+    # The sensor's own point clouds: only the single chip makes them on board.
+    onboard = radar == "single_chip" and "pointclouds" in streams
     static = ctx.scene.static_scatterers
     n = len(times)
     world_T = np.zeros((n, 4, 4))
@@ -331,14 +343,13 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
                             channel_errors=calib.phase_frequency if radar == "cascade" else None,
                             coupling_adc=ctx.coupling_adc[radar], rng=g)
         raw = encode_adc(frame)
-        atomic_write_bytes(adc_dir / "data" / f"frame_{i}.bin", raw)
+        atomic_write_bytes(ctx.root / streams["adc"].frame_path(first + i), raw)
         if proc is not None:
             hm = proc.heatmap(decode_adc(raw, calib.frame_shape))
-            write_heatmap(ctx.root / radar / "heatmaps" / "data" / f"heatmap_{i}.bin", hm)
-        if radar == "single_chip":
+            write_heatmap(ctx.root / streams["heatmaps"].frame_path(first + i), hm)
+        if onboard:
             pts = onboard_pointcloud(calib, model, targets, g)
-            write_radar_pointcloud(ctx.root / radar / "pointclouds" / "data"
-                                   / f"radar_pointcloud_{i}.bin", pts)
+            write_radar_pointcloud(ctx.root / streams["pointclouds"].frame_path(first + i), pts)
         m = np.eye(4)
         m[:3, :3] = r_ws.as_matrix()
         m[:3, 3] = origin
@@ -353,15 +364,15 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
         offsets.append(offsets[-1] + len(targets))
         ctx.report(radar, i + 1, n)
     stamps = ctx.start_time + times
-    write_timestamps(adc_dir / "timestamps.txt", stamps)
+    write_timestamps(ctx.root / streams["adc"].timestamps_path, stamps)
     if proc is not None:
-        write_timestamps(ctx.root / radar / "heatmaps" / "timestamps.txt", stamps)
+        write_timestamps(ctx.root / streams["heatmaps"].timestamps_path, stamps)
         # The grid's true angles beside the heatmaps too (as `coloradar process` writes them).
-        atomic_write_text(ctx.root / radar / "heatmaps" / "heatmap_cfg.txt",
+        atomic_write_text(ctx.root / streams["heatmaps"].folder / "heatmap_cfg.txt",
                           format_heatmap_cfg(calib.heatmap))
-    if radar == "single_chip":
-        write_timestamps(ctx.root / radar / "pointclouds" / "timestamps.txt", stamps)
-    out = {f"{radar}/timestamps": stamps, f"{radar}/world_T_radar": world_T,
+    if onboard:
+        write_timestamps(ctx.root / streams["pointclouds"].timestamps_path, stamps)
+    out: dict[str, np.ndarray] = {f"{radar}/timestamps": stamps, f"{radar}/world_T_radar": world_T,
            f"{radar}/velocity": vel, f"{radar}/angular_velocity": ang,
            f"{radar}/offsets": np.asarray(offsets, dtype=np.int64)}
     for k, parts in acc.items():
@@ -374,12 +385,12 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
 def _lidar_task(ctx: _Context, times: np.ndarray) -> dict[str, np.ndarray]:
     model = LidarModel()
     base_T_l = ctx.calib.transforms["lidar"].matrix()
-    folder = ctx.root / "lidar"
+    st = ctx.layout.frame("lidar/pointclouds")
     for i, t in enumerate(times):
         pts = simulate_scan(ctx.scene, ctx.traj, base_T_l, t, model, ctx.rng("lidar", i))
-        write_lidar_pointcloud(folder / "pointclouds" / f"lidar_pointcloud_{i}.bin", pts)
+        write_lidar_pointcloud(ctx.root / st.frame_path(ctx.layout.first_frame + i), pts)
         ctx.report("lidar", i + 1, len(times))
-    write_timestamps(folder / "timestamps.txt", ctx.start_time + times)
+    write_timestamps(ctx.root / st.timestamps_path, ctx.start_time + times)
     return {"lidar/timestamps": ctx.start_time + times}
 
 
@@ -400,7 +411,7 @@ def simulate_run(
     duration: float = 10.0,
     seed: int = 0,
     motion: str = "smooth",
-    sensors: Sequence[str] = SENSOR_CHOICES,
+    sensors: Sequence[str] | None = None,
     vicon: bool = False,
     heatmaps: bool | None = None,
     start_time: float = DEFAULT_START_TIME,
@@ -409,13 +420,15 @@ def simulate_run(
     board_seed: int = 2021,
     workers: int = 2,
     progress: Progress | None = None,
+    layout: str | RunLayout = "coloradar",
 ) -> SimResult:
     """Simulate one run and write it, with its calibration, under ``out``.
 
     Parameters
     ----------
     out
-        Output root: gets ``calib/`` and ``<name>/`` (created if needed).
+        Output root: gets ``calib/`` and ``<name>/`` (``kitti/<name>/`` for ColoRadar+),
+        created if needed.
     scene
         A built-in scene name (``corridor``, ``courtyard``, ``mine``), a ``.json`` scene file or
         a :class:`~coloradar.sim.scene.Scene`.
@@ -426,7 +439,7 @@ def simulate_run(
     motion
         Motion profile: ``smooth``, ``handheld`` or ``aggressive``.
     sensors
-        Subset of :data:`SENSOR_CHOICES` to write.
+        Subset of :data:`SENSOR_CHOICES` to write; None: every sensor of the layout.
     vicon
         Also write ``vicon/`` (100 Hz).
     heatmaps
@@ -443,17 +456,30 @@ def simulate_run(
         Threads (the lidar is simulated beside the radars).
     progress
         ``progress(stage, done, total)`` callback.
+    layout
+        ``"coloradar"`` or ``"coloradar_plus"`` (:mod:`coloradar.formats.layout`): folders,
+        frame numbering and calib files as that release has them. ColoRadar+ has no
+        single-chip radar and no Vicon; the simulator writes no camera images.
 
     Returns
     -------
     SimResult
     """
     t0 = time.perf_counter()
-    sensors = tuple(sensors)
-    bad = [s for s in sensors if s not in SENSOR_CHOICES]
+    try:
+        lay = get_layout(layout)
+    except MissingDataError as exc:
+        raise ColoradarError(str(exc)) from None
+    choices = tuple(s for s in SENSOR_CHOICES
+                    if s in lay.sensor_folders and (s not in RADARS or s in lay.radars))
+    sensors = choices if sensors is None else tuple(sensors)
+    bad = [s for s in sensors if s not in choices]
     if bad:
-        raise ColoradarError(f"unknown sensor(s) {', '.join(bad)}; expected some of "
-                             f"{', '.join(SENSOR_CHOICES)}")
+        raise ColoradarError(f"unknown sensor(s) {', '.join(bad)}"
+                             f"{'' if lay is COLORADAR else ' in the ' + lay.title + ' layout'}"
+                             f"; expected some of {', '.join(choices)}")
+    if vicon and "vicon" not in lay.tables:
+        raise ColoradarError(f"the {lay.title} layout has no Vicon poses")
     if motion not in MOTION_PROFILES:
         raise ColoradarError(f"unknown motion profile {motion!r}; expected one of "
                              f"{', '.join(MOTION_PROFILES)}")
@@ -462,7 +488,8 @@ def simulate_run(
     sc = resolve_scene(scene)
     out = Path(out)
     name = name or run_name(sc.name, seed, start_time)
-    final = out / name
+    runs = out / lay.runs_folder if lay.runs_folder else out
+    final = runs / name
     _check_target(final, overwrite)
     want_heatmaps = heatmaps is not False and any(r in sensors for r in RADARS)
     calib, coupling_adc = simulated_calibration(board_seed)
@@ -470,14 +497,15 @@ def simulate_run(
     if heatmaps and want_heatmaps and not has_proc:
         raise ColoradarError("heatmaps were asked for but coloradar.dsp (RadarProcessor."
                              "heatmap) is not available")
-    _write_calib(calib, out / "calib", overwrite)
+    _write_calib(calib, out / "calib", overwrite, lay)
 
-    partial = out / f".{name}.partial"
+    partial = runs / f".{name}.partial"
     if partial.exists():
         shutil.rmtree(partial)  # a previous, interrupted simulation of this run
     partial.mkdir(parents=True)
     traj = make_trajectory(sc.rig_path, motion, [seed, _STREAM_KEY["trajectory"]])
-    ctx = _Context(sc, traj, calib, coupling_adc, seed, start_time, partial, progress, has_proc)
+    ctx = _Context(sc, traj, calib, coupling_adc, seed, start_time, partial, progress, has_proc,
+                   lay)
     trng = ctx.rng("timing")
     # Every stream's timestamps, drawn in a fixed order whatever the sensor selection.
     times = {
@@ -502,7 +530,7 @@ def simulate_run(
         tasks.append(lambda: _lidar_task(ctx, times["lidar"]))
     for r in RADARS:
         if r in sensors:
-            tasks.append(lambda r=r: _radar_task(ctx, r, times[r]))
+            tasks.append(functools.partial(_radar_task, ctx, r, times[r]))
     truth: dict[str, np.ndarray] = {}
     try:
         if workers > 1 and len(tasks) > 1:
@@ -513,11 +541,12 @@ def simulate_run(
             for t in tasks:
                 truth.update(t())
         truth.update(_write_slow_streams(ctx, sensors, vicon, times, gt_times))
-        counts = _counts(sensors, vicon, times, gt_times, has_proc)
+        counts = _counts(sensors, vicon, times, gt_times, has_proc, lay)
         _write_run_info(ctx, partial, sc, dict(
             scene=sc.name, duration=duration, seed=seed, motion=motion, sensors=list(sensors),
             vicon=vicon, heatmaps=has_proc, start_time=start_time, name=name,
-            board_seed=board_seed, coloradar_version=__version__, counts=counts), truth)
+            board_seed=board_seed, coloradar_version=__version__, counts=counts,
+            layout=lay.name), truth)
     except BaseException:
         shutil.rmtree(partial, ignore_errors=True)
         raise
@@ -550,13 +579,15 @@ def _write_slow_streams(ctx: _Context, sensors: Sequence[str], vicon: bool,
         rel_pos = inv.apply(gt.position - start_pos)
         poses = np.hstack([rel_pos, rel_rot.as_quat(canonical=True)])
         poses[0] = [0, 0, 0, 0, 0, 0, 1]  # exactly the identity, as in the dataset
-        write_timestamps(root / "groundtruth" / "timestamps.txt", ctx.start_time + gt_times)
-        write_poses(root / "groundtruth" / "groundtruth_poses.txt", poses)
+        gt_table = ctx.layout.tables["groundtruth"]
+        write_timestamps(root / gt_table.timestamps_path, ctx.start_time + gt_times)
+        write_poses(root / gt_table.path, poses)
     if "imu" in sensors:
         data, ab, gb = simulate_imu(traj, calib.transforms["imu"].matrix(), times["imu"],
                                     ImuModel(), ctx.rng("imu"))
-        write_timestamps(root / "imu" / "timestamps.txt", ctx.start_time + times["imu"])
-        write_imu(root / "imu" / "imu_data.txt", data)
+        imu_table = ctx.layout.tables["imu"]
+        write_timestamps(root / imu_table.timestamps_path, ctx.start_time + times["imu"])
+        write_imu(root / imu_table.path, data)
         truth.update({"imu_accel_bias": ab, "imu_gyro_bias": gb})
     if vicon:
         vt = times["vicon"]
@@ -566,8 +597,9 @@ def _write_slow_streams(ctx: _Context, sensors: Sequence[str], vicon: bool,
         rot = (st.rotation * Rotation.from_matrix(base_T_v[:3, :3])
                * Rotation.from_rotvec(g.normal(0, np.radians(0.05), (len(vt), 3))))
         pos = st.position + st.rotation.apply(base_T_v[:3, 3]) + g.normal(0, 5e-4, (len(vt), 3))
-        write_timestamps(root / "vicon" / "timestamps.txt", ctx.start_time + vt)
-        write_poses(root / "vicon" / "vicon_poses.txt",
+        vicon_table = ctx.layout.tables["vicon"]
+        write_timestamps(root / vicon_table.timestamps_path, ctx.start_time + vt)
+        write_poses(root / vicon_table.path,
                     np.hstack([pos, rot.as_quat(canonical=True)]))
     sc = ctx.scene
     static = sc.static_scatterers
@@ -582,14 +614,15 @@ def _write_slow_streams(ctx: _Context, sensors: Sequence[str], vicon: bool,
     return truth
 
 
-def _counts(sensors, vicon, times, gt_times, heatmaps) -> dict[str, int]:
+def _counts(sensors, vicon, times, gt_times, heatmaps, layout: RunLayout = COLORADAR
+            ) -> dict[str, int]:
     counts = {}
     for r in RADARS:
         if r in sensors:
             counts[f"{r}/adc"] = len(times[r])
             if heatmaps:
                 counts[f"{r}/heatmaps"] = len(times[r])
-            if r == "single_chip":
+            if r == "single_chip" and f"{r}/pointclouds" in layout.frames:
                 counts[f"{r}/pointclouds"] = len(times[r])
     if "lidar" in sensors:
         counts["lidar/pointclouds"] = len(times["lidar"])

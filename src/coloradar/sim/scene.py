@@ -31,7 +31,8 @@ from pathlib import Path as FsPath
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..errors import ColoradarError
+from ..errors import ColoradarError, MissingDataError, SettingsError
+from ..formats.source import read_file_text
 from .paths import Path, path_from_dict
 from .raycast import RectArrays
 
@@ -51,7 +52,7 @@ def _unit(v, what: str) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64).reshape(3)
     n = np.linalg.norm(v)
     if not n > 0:
-        raise ValueError(f"{what}: zero-length direction")
+        raise SettingsError(f"{what}: zero-length direction")
     return v / n
 
 
@@ -96,7 +97,7 @@ class Rect:
         object.__setattr__(self, "v", v)
         object.__setattr__(self, "size", np.asarray(self.size, dtype=np.float64).reshape(2))
         if np.any(self.size <= 0):
-            raise ValueError(f"rect {self.name!r}: size must be positive")
+            raise SettingsError(f"rect {self.name!r}: size must be positive")
 
     @property
     def normal(self) -> np.ndarray:
@@ -142,7 +143,7 @@ class Box:
         object.__setattr__(self, "center", np.asarray(self.center, dtype=np.float64).reshape(3))
         object.__setattr__(self, "size", np.asarray(self.size, dtype=np.float64).reshape(3))
         if np.any(self.size <= 0):
-            raise ValueError(f"box {self.name!r}: size must be positive")
+            raise SettingsError(f"box {self.name!r}: size must be positive")
 
     def faces(self) -> list[Rect]:
         """The six faces, normals pointing out (the bottom one left out when on the floor)."""
@@ -159,7 +160,7 @@ class Box:
         for i, (n, off, u, v, size) in enumerate(spec):
             if i == 5 and c[2] - hz <= 0.01:
                 continue  # resting on the floor: its bottom is never seen
-            faces.append(Rect(c + n * off, u, v, size, self.reflectivity,
+            faces.append(Rect(c + n * off, u, v, np.array(size), self.reflectivity,
                               self.lidar_reflectivity, True, f"{self.name}:face{i}"))
         return faces
 
@@ -286,8 +287,8 @@ class MovingObject:
 
     def __post_init__(self) -> None:
         if self.kind not in ("person", "box"):
-            raise ValueError(f"object {self.name!r}: kind must be 'person' or 'box', "
-                             f"got {self.kind!r}")
+            raise SettingsError(f"object {self.name!r}: kind must be 'person' or 'box', "
+                                f"got {self.kind!r}")
         object.__setattr__(self, "size", np.asarray(self.size, dtype=np.float64).reshape(3))
 
     @cached_property
@@ -303,7 +304,7 @@ class MovingObject:
             rcs = p[:, 6] * self.rcs / p[:, 6].sum()
             return {"pos": p[:, :3] * [1, 1, scale], "normal": normal, "swing": p[:, 4],
                     "swing_phase": p[:, 5], "strength": np.sqrt(rcs)}
-        box = Box([0, 0, self.size[2] / 2], self.size, 0.0, self.reflectivity,
+        box = Box(np.array([0, 0, self.size[2] / 2]), self.size, 0.0, self.reflectivity,
                   self.lidar_reflectivity, self.rcs, self.name)
         s = _sample_rects(box.faces(), 0.3, np.random.default_rng(0))
         e = _sample_edges([box], 0.3)
@@ -347,7 +348,7 @@ class MovingObject:
         """The object's box faces at times ``t``: geometry ``(T, 5, ...)``."""
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         ps = self.path.sample(t)
-        faces = Box([0, 0, self.size[2] / 2], self.size, 0.0).faces()
+        faces = Box(np.array([0, 0, self.size[2] / 2]), self.size, 0.0).faces()
         rot = Rotation.from_euler("z", ps.heading[:, None]).as_matrix()                  # (T, 3, 3)
 
         def world(vecs, offset=None):
@@ -539,7 +540,7 @@ def _room_rects(d: dict, where: str) -> list[Rect]:
     lo = np.asarray(d["min"], dtype=np.float64)
     hi = np.asarray(d["max"], dtype=np.float64)
     if lo.shape != (3,) or hi.shape != (3,) or np.any(hi <= lo):
-        raise ValueError(f"{where}: 'min' and 'max' must be 3 numbers each, max > min")
+        raise SettingsError(f"{where}: 'min' and 'max' must be 3 numbers each, max > min")
     c, s = (lo + hi) / 2, hi - lo
     rho = float(d.get("reflectivity", 0.1))
     lid = float(d.get("lidar_reflectivity", 0.4))
@@ -548,16 +549,20 @@ def _room_rects(d: dict, where: str) -> list[Rect]:
     ex, ey, ez = np.eye(3)
     out = []
     if d.get("floor", True):
-        out.append(Rect([c[0], c[1], lo[2]], ex, ey, [s[0], s[1]], rho_floor, lid,
+        out.append(Rect(np.array([c[0], c[1], lo[2]]), ex, ey, np.array([s[0], s[1]]), rho_floor, lid,
                         name=f"{name}:floor"))
     if d.get("ceiling", True):
-        out.append(Rect([c[0], c[1], hi[2]], ex, ey, [s[0], s[1]], rho, lid,
+        out.append(Rect(np.array([c[0], c[1], hi[2]]), ex, ey, np.array([s[0], s[1]]), rho, lid,
                         name=f"{name}:ceiling"))
     if d.get("walls", True):
-        out += [Rect([lo[0], c[1], c[2]], ey, ez, [s[1], s[2]], rho, lid, name=f"{name}:wall-x"),
-                Rect([hi[0], c[1], c[2]], ey, ez, [s[1], s[2]], rho, lid, name=f"{name}:wall+x"),
-                Rect([c[0], lo[1], c[2]], ex, ez, [s[0], s[2]], rho, lid, name=f"{name}:wall-y"),
-                Rect([c[0], hi[1], c[2]], ex, ez, [s[0], s[2]], rho, lid, name=f"{name}:wall+y")]
+        out += [Rect(np.array([lo[0], c[1], c[2]]), ey, ez, np.array([s[1], s[2]]), rho, lid,
+                     name=f"{name}:wall-x"),
+                Rect(np.array([hi[0], c[1], c[2]]), ey, ez, np.array([s[1], s[2]]), rho, lid,
+                     name=f"{name}:wall+x"),
+                Rect(np.array([c[0], lo[1], c[2]]), ex, ez, np.array([s[0], s[2]]), rho, lid,
+                     name=f"{name}:wall-y"),
+                Rect(np.array([c[0], hi[1], c[2]]), ex, ez, np.array([s[0], s[2]]), rho, lid,
+                     name=f"{name}:wall+y")]
     return out
 
 
@@ -568,7 +573,7 @@ def scene_from_dict(d: dict, source: str = "<scene>") -> Scene:
     """
     try:
         if "rig_path" not in d:
-            raise ValueError("missing 'rig_path'")
+            raise SettingsError("missing 'rig_path'")
         rects: list[Rect] = []
         for i, room in enumerate(d.get("rooms", [])):
             rects += _room_rects(room, f"rooms[{i}]")
@@ -579,7 +584,7 @@ def scene_from_dict(d: dict, source: str = "<scene>") -> Scene:
                                   float(r.get("lidar_reflectivity", 0.4)),
                                   bool(r.get("one_sided", False)), r.get("name", f"rect{i}")))
             except (KeyError, TypeError, ValueError) as exc:
-                raise ValueError(f"rects[{i}]: {exc}") from None
+                raise SettingsError(f"rects[{i}]: {exc}") from None
         boxes = []
         for i, b in enumerate(d.get("boxes", [])):
             try:
@@ -588,14 +593,14 @@ def scene_from_dict(d: dict, source: str = "<scene>") -> Scene:
                                  float(b.get("lidar_reflectivity", 0.5)),
                                  float(b.get("edge_rcs", 0.02)), b.get("name", f"box{i}")))
             except (KeyError, TypeError, ValueError) as exc:
-                raise ValueError(f"boxes[{i}]: {exc}") from None
+                raise SettingsError(f"boxes[{i}]: {exc}") from None
         refl = []
         for i, r in enumerate(d.get("reflectors", [])):
             try:
                 refl.append(Reflector(r["position"], float(r.get("rcs", 0.1)),
                                       r.get("name", f"reflector{i}")))
             except (KeyError, TypeError, ValueError) as exc:
-                raise ValueError(f"reflectors[{i}]: {exc}") from None
+                raise SettingsError(f"reflectors[{i}]: {exc}") from None
         objs = []
         for i, o in enumerate(d.get("objects", [])):
             try:
@@ -608,10 +613,10 @@ def scene_from_dict(d: dict, source: str = "<scene>") -> Scene:
                                          float(o.get("gait_frequency", 0.9)),
                                          o.get("name", f"object{i}")))
             except (KeyError, TypeError, ValueError) as exc:
-                raise ValueError(f"objects[{i}]: {exc}") from None
+                raise SettingsError(f"objects[{i}]: {exc}") from None
         spacing = float(d.get("spacing", 0.3))
         if not 0.02 <= spacing <= 5:
-            raise ValueError(f"spacing {spacing} m is outside 0.02..5 m")
+            raise SettingsError(f"spacing {spacing} m is outside 0.02..5 m")
         return Scene(str(d.get("name", "custom")), path_from_dict(d["rig_path"], "rig_path"),
                      tuple(rects), tuple(boxes), tuple(refl), tuple(objs), spacing,
                      int(d.get("seed", 1)), str(d.get("description", "")))
@@ -623,9 +628,9 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
     """Read a scene from a JSON file."""
     p = FsPath(path)
     try:
-        d = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ColoradarError(f"{p}: no such scene file") from None
+        d = json.loads(read_file_text(p))
+    except MissingDataError:
+        raise MissingDataError(f"{p}: no such scene file") from None
     except json.JSONDecodeError as exc:
         raise ColoradarError(f"{p}: not valid JSON ({exc})") from None
     if not isinstance(d, dict):

@@ -11,12 +11,14 @@ truth file are exact at every timestamp.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .paths import Path, Sinusoids
+from ..errors import SettingsError
+from .paths import EllipsePath, LinePath, Path, Sinusoids
 
 __all__ = ["MOTION_PROFILES", "RigState", "RigTrajectory", "make_trajectory"]
 
@@ -170,7 +172,7 @@ def _random_sinusoids(rng: np.random.Generator, amplitude: float, band: tuple[fl
 
 
 def make_trajectory(path: Path, profile: str = "smooth",
-                    seed: int | np.random.Generator | None = 0) -> RigTrajectory:
+                    seed: int | Sequence[int] | np.random.Generator | None = 0) -> RigTrajectory:
     """A rig trajectory along ``path`` with the perturbations of a motion profile.
 
     Parameters
@@ -183,11 +185,11 @@ def make_trajectory(path: Path, profile: str = "smooth",
         Seed of the perturbations' random amplitudes, frequencies and phases.
     """
     if profile not in MOTION_PROFILES:
-        raise ValueError(f"unknown motion profile {profile!r}; expected one of "
-                         f"{', '.join(MOTION_PROFILES)}")
+        raise SettingsError(f"unknown motion profile {profile!r}; expected one of "
+                            f"{', '.join(MOTION_PROFILES)}")
     spec = MOTION_PROFILES[profile]
     rng = np.random.default_rng(seed)
-    if spec["speed_factor"] != 1.0 and hasattr(path, "speed"):
+    if spec["speed_factor"] != 1.0 and isinstance(path, EllipsePath | LinePath):
         path = replace(path, speed=path.speed * spec["speed_factor"])
     amps, band = spec["offset"]
     offset = tuple(_random_sinusoids(rng, a, band) for a in amps)

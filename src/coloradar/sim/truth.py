@@ -28,6 +28,7 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -42,7 +43,9 @@ TRUTH_FILE = "truth/truth.npz"
 def save_truth(path: str | os.PathLike[str], arrays: dict[str, np.ndarray]) -> None:
     """Write the truth arrays atomically as a compressed ``.npz``."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
+    # numpy's stubs type **kwds as if a key could hit the ``allow_pickle`` flag (numpy >= 2.1).
+    named: dict[str, Any] = dict(arrays)
+    np.savez_compressed(buf, **named)
     atomic_write_bytes(path, buf.getvalue())
 
 

@@ -9,7 +9,7 @@ from ._figure import cell_edges, new_figure, save_figure, to_db
 from .animate import animate_run, animation_times, ffmpeg_path
 from .frame_views import VIEWS, frame_figure, range_azimuth_figure, range_doppler_figure
 from .radar import plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
-from .scene import Scene, draw_scene, gather_scene, heatmap_points, plot_scene, scene_time
+from .scene import Scene, draw_scene, gather_scene, plot_scene, scene_time
 
 __all__ = [
     "VIEWS",
@@ -21,7 +21,6 @@ __all__ = [
     "ffmpeg_path",
     "frame_figure",
     "gather_scene",
-    "heatmap_points",
     "new_figure",
     "plot_heatmap_slice",
     "plot_range_azimuth",

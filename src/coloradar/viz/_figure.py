@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import MissingDependencyError, SettingsError
 from ..formats.atomic import atomic_write_bytes, new_output_path
 
 try:
@@ -20,9 +21,31 @@ try:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 except ImportError as exc:  # pragma: no cover - depends on the environment
-    raise ImportError("coloradar.viz needs matplotlib: pip install 'coloradar[viz]'") from exc
+    raise MissingDependencyError("coloradar.viz needs matplotlib: pip install 'coloradar[viz]'"
+                                 ) from exc
 
-__all__ = ["cell_edges", "new_figure", "save_figure", "to_db"]
+__all__ = ["cell_edges", "check_image_path", "new_figure", "save_figure", "to_db"]
+
+
+def check_image_path(path: str | os.PathLike[str], overwrite: bool = False) -> Path:
+    """``path`` as a :class:`~pathlib.Path` for an image about to be saved, checked before any
+    work: its suffix names a format matplotlib writes (none means PNG) and it does not exist
+    unless ``overwrite``.
+
+    Raises
+    ------
+    SettingsError
+        For an unsupported suffix (naming the supported ones).
+    OutputExistsError
+        When ``path`` exists and ``overwrite`` is not set.
+    """
+    path = Path(path)
+    fmt = path.suffix.lstrip(".").lower()
+    supported = FigureCanvasAgg.get_supported_filetypes()
+    if fmt and fmt not in supported:
+        raise SettingsError(f"{path}: cannot write a .{fmt} image; expected one of "
+                            f"{', '.join('.' + s for s in sorted(supported))}")
+    return new_output_path(path, overwrite)
 
 matplotlib.rcParams.setdefault("figure.max_open_warning", 0)
 
@@ -44,7 +67,7 @@ def save_figure(fig: Figure, path: str | os.PathLike[str], *, overwrite: bool = 
     Raises :class:`~coloradar.OutputExistsError` when ``path`` exists and not ``overwrite``.
     The image has exactly the figure's size in pixels (no tight cropping).
     """
-    path = new_output_path(path, overwrite)
+    path = check_image_path(path, overwrite)
     buf = io.BytesIO()
     fmt = path.suffix.lstrip(".").lower() or "png"
     fig.savefig(buf, format=fmt, dpi=fig.dpi)

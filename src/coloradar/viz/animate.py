@@ -21,7 +21,7 @@ from matplotlib import animation
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 
-from ..errors import ColoradarError, MissingDataError
+from ..errors import MissingDataError, MissingDependencyError, SettingsError
 from ..formats.atomic import default_file_mode, new_output_path
 from ._figure import new_figure
 from .scene import (
@@ -49,17 +49,19 @@ def ffmpeg_path() -> str | None:
 
 def _writer(suffix: str, fps: float) -> animation.AbstractMovieWriter:
     if suffix == ".gif":
-        return animation.PillowWriter(fps=fps)
+        # matplotlib's stubs say int; both writers take a fractional rate (Pillow: a frame lasts
+        # 1000/fps ms; ffmpeg: -r fps).
+        return animation.PillowWriter(fps=fps)  # type: ignore[arg-type]
     if suffix == ".mp4":
         exe = ffmpeg_path()
         if exe is None:
-            raise ColoradarError("writing .mp4 needs ffmpeg: pip install imageio-ffmpeg "
-                                 "(or 'coloradar[viz]'), or write a .gif")
+            raise MissingDependencyError("writing .mp4 needs ffmpeg: pip install imageio-ffmpeg "
+                                         "(or 'coloradar[viz]'), or write a .gif")
         matplotlib.rcParams["animation.ffmpeg_path"] = exe
         # yuv420p: the pixel format every player decodes; even sizes are ensured by the figure.
-        return animation.FFMpegWriter(fps=fps, codec="libx264",
+        return animation.FFMpegWriter(fps=fps, codec="libx264",  # type: ignore[arg-type]
                                       extra_args=["-pix_fmt", "yuv420p"])
-    raise ColoradarError(f"unsupported animation format {suffix!r}: use .mp4 or .gif")
+    raise SettingsError(f"unsupported animation format {suffix!r}: use .mp4 or .gif")
 
 
 def animation_times(seq, start: float = 0.0, duration: float | None = None,

@@ -7,13 +7,15 @@ has them (else heatmaps computed from ADC); the scene view is :func:`~.scene.plo
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from matplotlib.figure import Figure
 
 from ..calib import RadarCalib
-from ..errors import MissingDataError
+from ..errors import MissingDataError, SettingsError
 from .radar import plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
-from .scene import _has, _run_start, plot_scene
+from .scene import _has, _run_start, plot_scene, radar_source
 
 __all__ = ["VIEWS", "frame_figure", "range_azimuth_figure", "range_doppler_figure"]
 
@@ -48,7 +50,7 @@ def range_azimuth_figure(adc: np.ndarray, calib: RadarCalib, *, mode: str = "bev
                               mode=mode, title=title or f"{calib.name} range–azimuth", **kw)
 
 
-def frame_figure(seq, view: str, index: int = 0, *, radar: str = "cascade",
+def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
                  coords: str = "base", scene_view: str = "bev", stream: str | None = None,
                  extent: float | None = 20.0, heatmap_slice: str = "azimuth-range",
                  polar: bool = False, max_range: float | None = None) -> Figure:
@@ -64,7 +66,9 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str = "cascade",
         Frame index in the radar's ADC stream (range-doppler, range-azimuth), its heatmap
         stream (heatmap), or the scene's reference stream (scene; see ``stream``).
     radar
-        ``"cascade"`` or ``"single_chip"``.
+        ``"cascade"`` or ``"single_chip"``; None: the cascade, and for the scene both radars.
+        A scene with a radar named shows the lidar and that radar only, and ``index`` counts
+        in that radar's point stream unless ``stream`` is given.
     coords, scene_view, stream, extent
         Scene: frame (``"base"``, ``"world"`` or a sensor name), ``"bev"`` or ``"3d"``, the
         stream ``index`` counts in, half-width [m] (:func:`~.scene.plot_scene`).
@@ -76,10 +80,20 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str = "cascade",
         Clip range axes [m].
     """
     if view not in VIEWS:
-        raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
+        raise SettingsError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
     if view == "scene":
+        gather: dict[str, Any] = {}
+        if radar is not None:
+            if stream is None:
+                stream = radar_source(seq, radar)
+                if stream is None:
+                    raise MissingDataError(f"{seq.name}: no {radar} point clouds, ADC frames "
+                                           f"or heatmaps to show (present: "
+                                           f"{', '.join(seq.available()) or 'nothing'})")
+            gather["sensors"] = ("lidar", radar)
         return plot_scene(seq, index=index, stream=stream, frame=coords, view=scene_view,
-                          extent=extent)
+                          extent=extent, **gather)
+    radar = radar or "cascade"
     calib = seq.calib.radar(radar)
     t_run = _run_start(seq)
     has_adc, has_hm = _has(seq, f"{radar}/adc"), _has(seq, f"{radar}/heatmaps")

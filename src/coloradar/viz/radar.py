@@ -13,6 +13,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..calib import HeatmapConfig
+from ..errors import FrameIndexError, SettingsError
 from ._figure import cell_edges, new_figure, to_db
 
 __all__ = [
@@ -28,7 +29,7 @@ def _uniform_extent(centres: np.ndarray) -> tuple[float, float]:
     c = np.asarray(centres, dtype=np.float64)
     step = (c[-1] - c[0]) / (c.size - 1) if c.size > 1 else 1.0
     if c.size > 2 and not np.allclose(np.diff(c), step, rtol=1e-6, atol=0):
-        raise ValueError("bin centres must be uniformly spaced for this image")
+        raise SettingsError("bin centres must be uniformly spaced for this image")
     return float(c[0] - step / 2), float(c[-1] + step / 2)
 
 
@@ -44,7 +45,9 @@ def _levels(img: np.ndarray, dynamic_range: float | None) -> tuple[float, float]
 def _target_axes(fig: Figure | None, ax: Axes | None, size: tuple[float, float]) -> tuple[
         Figure, Axes]:
     if ax is not None:
-        return ax.figure, ax
+        # An axes inside a SubFigure: callers get (and save) the whole figure.
+        f = ax.figure
+        return (f if isinstance(f, Figure) else f.figure), ax
     fig = fig or new_figure(*size)
     return fig, (fig.axes[0] if fig.axes else fig.add_subplot())
 
@@ -83,8 +86,8 @@ def plot_range_doppler(power: np.ndarray, range_bins: np.ndarray, velocity_bins:
     r = np.asarray(range_bins, dtype=np.float64)
     v = np.asarray(velocity_bins, dtype=np.float64)
     if p.shape != (r.size, v.size):
-        raise ValueError(f"power is {p.shape} but the axes are {r.size} ranges x {v.size} "
-                         "Doppler bins")
+        raise SettingsError(f"power is {p.shape} but the axes are {r.size} ranges x {v.size} "
+                            "Doppler bins")
     if max_range is not None:
         keep = r <= max_range
         p, r = p[keep], r[keep]
@@ -131,8 +134,8 @@ def plot_range_azimuth(power: np.ndarray, range_bins: np.ndarray, azimuth_bins: 
     r = np.asarray(range_bins, dtype=np.float64)
     az = np.asarray(azimuth_bins, dtype=np.float64)
     if p.shape != (az.size, r.size):
-        raise ValueError(f"power is {p.shape} but the axes are {az.size} azimuths x {r.size} "
-                         "ranges")
+        raise SettingsError(f"power is {p.shape} but the axes are {az.size} azimuths x {r.size} "
+                            "ranges")
     if max_range is not None:
         keep = r <= max_range
         p, r = p[:, keep], r[keep]
@@ -157,7 +160,7 @@ def plot_range_azimuth(power: np.ndarray, range_bins: np.ndarray, azimuth_bins: 
         ax.set_xlabel("y [m] (left +)")
         ax.set_ylabel("x [m] (boresight)")
     else:
-        raise ValueError(f"mode must be 'bev' or 'polar', got {mode!r}")
+        raise SettingsError(f"mode must be 'bev' or 'polar', got {mode!r}")
     ax.set_title(title or "range–azimuth", fontsize="medium")
     fig.colorbar(mesh, ax=ax, label="power [dB]" if db else "power")
     return fig
@@ -172,11 +175,11 @@ def _pick(hm: np.ndarray, axis: int, index: int | None, reduce: str) -> tuple[np
         return (np.take_along_axis(inten, np.expand_dims(arg, axis), axis).squeeze(axis),
                 np.take_along_axis(rate, np.expand_dims(arg, axis), axis).squeeze(axis), -1)
     if reduce != "slice":
-        raise ValueError(f"reduce must be 'slice' or 'max', got {reduce!r}")
+        raise SettingsError(f"reduce must be 'slice' or 'max', got {reduce!r}")
     if index is None:
         index = int(np.unravel_index(np.argmax(inten), inten.shape)[axis])
     if not -inten.shape[axis] <= index < inten.shape[axis]:
-        raise IndexError(f"bin {index} out of range for an axis of {inten.shape[axis]} bins")
+        raise FrameIndexError(f"bin {index} out of range for an axis of {inten.shape[axis]} bins")
     return np.take(inten, index, axis), np.take(rate, index, axis), index % inten.shape[axis]
 
 
@@ -216,7 +219,7 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
         hm = np.stack([hm, np.zeros_like(hm)], axis=-1)
         show_range_rate = False
     if hm.shape[:3] != config.shape or hm.shape[3] != 2:
-        raise ValueError(f"heatmap is {hm.shape}, the grid (el, az, range) is {config.shape}")
+        raise SettingsError(f"heatmap is {hm.shape}, the grid (el, az, range) is {config.shape}")
     if view == "azimuth-range":
         inten, rate, idx = _pick(hm, 0, index, reduce)                     # (az, range)
         where = ("max over elevation" if idx < 0 else
@@ -226,7 +229,7 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
         where = ("max over range" if idx < 0 else
                  f"range {config.range_bins[idx]:.2f} m (bin {idx})")
     else:
-        raise ValueError(f"view must be 'azimuth-range' or 'elevation-azimuth', got {view!r}")
+        raise SettingsError(f"view must be 'azimuth-range' or 'elevation-azimuth', got {view!r}")
     ncols = 2 if show_range_rate else 1
     fig = new_figure(*(size or (6.5 * ncols, 5.5)), ncols=ncols)
     img = to_db(inten) if db else inten

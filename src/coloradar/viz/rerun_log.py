@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ColoradarError
+from ..errors import MissingDependencyError
 from ..formats.atomic import new_output_path
 from ..geometry import sensor_to_base, trajectory_from_groundtruth, window_indices
 from .scene import RADAR_STREAMS, _has, _run_start, _stream, radar_points, radar_source
@@ -64,8 +64,8 @@ def log_run_rrd(seq, out: str | os.PathLike[str], *, start: float = 0.0,
     try:
         import rerun as rr
     except ImportError:
-        raise ColoradarError("logging to .rrd needs rerun: pip install 'coloradar[rerun]'") \
-            from None
+        raise MissingDependencyError("logging to .rrd needs rerun: "
+                                     "pip install 'coloradar[rerun]'") from None
     out = new_output_path(out, overwrite)
     traj = trajectory_from_groundtruth(seq)
     t0 = _run_start(seq) + start

@@ -11,6 +11,7 @@ extrinsic is used.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -18,67 +19,28 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
-from ..calib import Calibration, HeatmapConfig
-from ..errors import MissingDataError
+from ..calib import RADARS, Calibration
+from ..dsp.points import POINT_SOURCES, FramePoints, PointSource, default_point_source
+from ..errors import MissingDataError, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base, trajectory_from_groundtruth
 from ._figure import new_figure
 
-__all__ = ["RADAR_STREAMS", "Scene", "draw_scene", "gather_scene", "heatmap_points",
-           "plot_scene", "radar_points", "radar_source", "scene_time"]
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d import Axes3D
 
-RADAR_STREAMS = {
-    "cascade": ("cascade/pointclouds", "cascade/adc", "cascade/heatmaps"),
-    "single_chip": ("single_chip/pointclouds", "single_chip/adc", "single_chip/heatmaps"),
-}
-"""Where a radar's points come from, in order of preference: the run's point clouds, CFAR
-detections of its ADC frames (:meth:`coloradar.dsp.RadarProcessor.pointcloud`), the strongest
-cells of its heatmaps (:func:`heatmap_points`)."""
+__all__ = ["RADAR_STREAMS", "Scene", "draw_scene", "gather_scene", "plot_scene", "radar_points",
+           "radar_source", "scene_time"]
+
+RADAR_STREAMS = {r: tuple(f"{r}/{s}" for s in POINT_SOURCES) for r in RADARS}
+"""Where a radar's points come from, in order of preference (:data:`coloradar.dsp.POINT_SOURCES`):
+the run's point clouds, CFAR detections of its ADC frames, CFAR peaks of its heatmaps, each
+turned into points by :class:`coloradar.dsp.FramePoints`."""
 
 REFERENCE_STREAMS = ("cascade/heatmaps", "cascade/adc", "single_chip/pointclouds",
                      "single_chip/heatmaps", "single_chip/adc", "lidar/pointclouds")
 """Default stream whose frame index ``--frame`` counts."""
 
 _MARKERS = {"cascade": "o", "single_chip": "^"}
-
-
-def heatmap_points(heatmap: np.ndarray, config: HeatmapConfig, *, max_points: int = 400,
-                   dynamic_range: float = 25.0, min_range: float = 0.5) -> np.ndarray:
-    """The strongest cells of a 3-D radar heatmap as points.
-
-    Parameters
-    ----------
-    heatmap
-        float ``(el, az, range, 2)``: intensity, range rate [m/s].
-    config
-        Its grid.
-    max_points
-        Keep at most this many cells (the strongest).
-    dynamic_range
-        And only cells within this many dB of the strongest.
-    min_range
-        Skip cells nearer than this [m] (antenna coupling dominates the first bins).
-
-    Returns
-    -------
-    numpy.ndarray
-        float32 ``(K, 5)``: x y z [m] (radar frame, DESIGN.md §3), intensity, range rate [m/s].
-    """
-    hm = np.asarray(heatmap, dtype=np.float32)
-    inten = hm[..., 0].copy()
-    inten[..., config.range_bins < min_range] = 0.0
-    flat = inten.reshape(-1)
-    k = min(max_points, flat.size)
-    top = np.argpartition(flat, flat.size - k)[flat.size - k:]
-    peak = float(flat.max())
-    if peak <= 0:
-        return np.zeros((0, 5), dtype=np.float32)
-    top = top[flat[top] >= peak * 10.0 ** (-dynamic_range / 10.0)]
-    e, a, r = np.unravel_index(top, inten.shape)
-    rng = config.range_bins[r]
-    el, az = config.elevation_bins[e], config.azimuth_bins[a]
-    xyz = np.stack([rng * np.cos(el) * np.cos(az), rng * np.cos(el) * np.sin(az),
-                    rng * np.sin(el)], axis=1)
-    return np.column_stack([xyz, flat[top], hm[..., 1].reshape(-1)[top]]).astype(np.float32)
 
 
 @dataclass
@@ -113,35 +75,27 @@ class Scene:
     sources: dict[str, tuple[int, float]] = field(default_factory=dict)
 
 
-def _processor(seq, radar: str, cache: dict):
-    key = ("processor", radar)
-    if key not in cache:
-        try:
-            from ..dsp import RadarProcessor
-        except ImportError:  # pragma: no cover - dsp is part of the package
-            cache[key] = None
-        else:
-            cache[key] = RadarProcessor(seq.calib.radar(radar))
-    return cache[key]
-
-
 def radar_source(seq, radar: str, cache: dict | None = None) -> str | None:
     """The stream a radar's points are taken from (see :data:`RADAR_STREAMS`), or None."""
-    for name in RADAR_STREAMS[radar]:
-        if _has(seq, name) and (not name.endswith("/adc")
-                                or _processor(seq, radar, {} if cache is None else cache)):
-            return name
-    return None
+    radars = getattr(getattr(seq, "layout", None), "radars", RADARS)
+    src = default_point_source(seq, radar) if radar in radars else None
+    return None if src is None else f"{radar}/{src}"
 
 
 def radar_points(seq, radar: str, name: str, data: np.ndarray, *, max_points: int = 400,
                  cache: dict | None = None) -> np.ndarray:
-    """float32 ``(N, 5)`` points (radar frame) of one frame ``data`` read from stream ``name``."""
-    if name.endswith("/heatmaps"):
-        return heatmap_points(data, seq.calib.radar(radar).heatmap, max_points=max_points)
-    if name.endswith("/adc"):
-        return _processor(seq, radar, {} if cache is None else cache).pointcloud(data)
-    return np.asarray(data, dtype=np.float32)
+    """float32 ``(N, 5)`` points (radar frame) of one frame ``data`` read from stream ``name``
+    (:class:`coloradar.dsp.FramePoints`; at most ``max_points``, the strongest)."""
+    cache = {} if cache is None else cache
+    key = ("points", name, max_points)
+    if key not in cache:
+        source = cast(PointSource, name.split("/", 1)[1])
+        grid = None
+        if source == "heatmaps" and hasattr(seq, "radar"):
+            grid = seq.radar(radar).heatmap_config      # the grid the heatmaps were made on
+        cache[key] = FramePoints(seq.calib.radar(radar), source, heatmap_config=grid,
+                                 max_points=max_points)
+    return cache[key](data)
 
 
 def _has(seq, stream: str) -> bool:
@@ -152,10 +106,7 @@ def _has(seq, stream: str) -> bool:
 
 
 def _stream(seq, name: str):
-    sensor, product = name.split("/")
-    if product == "adc":
-        return seq.radar(sensor).adc
-    return getattr(getattr(seq, sensor), product)
+    return seq.stream(name)
 
 
 def scene_time(seq, index: int, stream: str | None = None) -> tuple[float, str]:
@@ -190,7 +141,7 @@ class _Framer:
         self.calib, self.frame, self.traj, self.t = calib, frame, traj, t
         self.frame_T_base = (SE3.identity() if frame in ("base", "world")
                              else sensor_to_base(calib, frame).inverse())
-        self.frame_T_world = None
+        self.frame_T_world: SE3 | None = None
         if traj is not None and traj.covers(np.array([t]))[0]:
             w_T_b = traj.at(t)
             self.frame_T_world = (SE3.identity() if frame == "world"
@@ -200,7 +151,9 @@ class _Framer:
 
     def pose(self, sensor: str, t_data: float) -> SE3:
         b_T_s = sensor_to_base(self.calib, sensor)
-        if self.frame_T_world is not None and self.traj.covers(np.array([t_data]))[0]:
+        if self.frame_T_world is None or self.traj is None:
+            return self.frame_T_base @ b_T_s
+        if self.traj.covers(np.array([t_data]))[0]:
             return self.frame_T_world @ self.traj.at(t_data) @ b_T_s
         if self.frame == "world":
             return self.frame_T_world @ self.traj.at(self.t) @ b_T_s
@@ -231,7 +184,7 @@ def gather_scene(seq, time: float, *, frame: str = "base",
     max_lidar_points
         Evenly thin lidar scans to at most this many points.
     max_radar_points
-        Cells kept per radar heatmap (:func:`heatmap_points`).
+        Points kept per radar frame, the strongest (:class:`coloradar.dsp.FramePoints`).
     trajectory
         ``world_T_base(t)``; default the run's ground truth when present.
     cache
@@ -251,14 +204,16 @@ def gather_scene(seq, time: float, *, frame: str = "base",
             cache[key] = make()
         return cache[key]
 
-    def read(name: str, i: int) -> np.ndarray:
-        return cached(name, i, lambda: _stream(seq, name)[i])
+    def read(name: str, i: int) -> np.ndarray | None:
+        # A bad frame is reported once (DataWarning) and its sensor left out of the picture,
+        # so that an animation goes on, as `coloradar process` skips a bad frame.
+        return cached(name, i, lambda: _stream(seq, name).read_or_skip(i))
 
     if "lidar" in sensors and _has(seq, "lidar/pointclouds"):
         ts = _stream(seq, "lidar/pointclouds").timestamps
         i = _latest(ts, time, max_age)
-        if i is not None:
-            cloud = read("lidar/pointclouds", i)
+        cloud = None if i is None else read("lidar/pointclouds", i)
+        if i is not None and cloud is not None:
             step = max(1, int(np.ceil(len(cloud) / max_lidar_points)))
             pts = cloud[::step, :3]
             pts = pts[np.all(np.isfinite(pts), axis=1) & (np.abs(pts).sum(axis=1) > 0)]
@@ -272,10 +227,12 @@ def gather_scene(seq, time: float, *, frame: str = "base",
             continue
         ts = _stream(seq, name).timestamps
         i = _latest(ts, time, max_age)
-        if i is None:
+        frame_data = None if i is None else read(name, i)
+        if i is None or frame_data is None:
             continue
-        data = cached(f"{name}:points", i, lambda name=name, i=i, radar=radar: radar_points(
-            seq, radar, name, read(name, i), max_points=max_radar_points, cache=cache))
+        data = cached(f"{name}:points", i, lambda name=name, i=i, radar=radar, d=frame_data:
+                      radar_points(seq, radar, name, d, max_points=max_radar_points,
+                                   cache=cache))
         pose = framer.pose(radar, float(ts[i]))
         scene.radars[radar] = np.column_stack([pose.apply(data[:, :3].astype(np.float32)),
                                                data[:, 4]]).astype(np.float32)
@@ -316,13 +273,14 @@ def _clip_3d(scene: Scene, centre: np.ndarray, extent: float) -> Scene:
     """A copy of ``scene`` without points outside the 3-D view box (mplot3d draws them)."""
     half = np.array([extent, extent, extent / 4])
 
-    def inside(p: np.ndarray | None) -> np.ndarray | None:
-        if p is None:
-            return None
+    def inside(p: np.ndarray) -> np.ndarray:
         return p[np.all(np.abs(p[:, :3] - centre) <= half, axis=1)]
 
-    return Scene(scene.frame, scene.time, inside(scene.lidar),
-                 {k: inside(v) for k, v in scene.radars.items()}, inside(scene.trajectory),
+    def maybe(p: np.ndarray | None) -> np.ndarray | None:
+        return None if p is None else inside(p)
+
+    return Scene(scene.frame, scene.time, maybe(scene.lidar),
+                 {k: inside(v) for k, v in scene.radars.items()}, maybe(scene.trajectory),
                  scene.rig, scene.sources)
 
 
@@ -351,20 +309,24 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
         if extent is not None and scene.rig is not None:
             scene = _clip_3d(scene, scene.rig[0], extent)
     else:
-        raise ValueError(f"view must be 'bev' or '3d', got {view!r}")
+        raise SettingsError(f"view must be 'bev' or '3d', got {view!r}")
     if scene.lidar is not None and len(scene.lidar):
         if view == "bev":
-            ax.scatter(*uv(scene.lidar), s=0.4, c="0.55", linewidths=0, label="lidar",
+            u, v = uv(scene.lidar)
+            ax.scatter(u, v, s=0.4, c="0.55", linewidths=0, label="lidar",
                        rasterized=True)
         else:
-            ax.scatter(*scene.lidar.T, s=0.3, c="0.55", linewidths=0, label="lidar")
+            x, y, z = scene.lidar[:, :3].T
+            cast("Axes3D", ax).scatter(x, y, z, s=0.3, c="0.55", linewidths=0, label="lidar")
     for radar, pts in scene.radars.items():
         if not len(pts):
             continue
-        kw = dict(c=pts[:, 3], cmap="coolwarm", norm=norm, s=14, marker=_MARKERS.get(radar, "o"),
-                  edgecolors="k", linewidths=0.3, label=f"{radar} radar")
+        kw: dict[str, Any] = dict(c=pts[:, 3], cmap="coolwarm", norm=norm, s=14,
+                                  marker=_MARKERS.get(radar, "o"), edgecolors="k",
+                                  linewidths=0.3, label=f"{radar} radar")
         if view == "bev":
-            ax.scatter(*uv(pts), **kw)
+            u, v = uv(pts)
+            ax.scatter(u, v, **kw)
         else:
             ax.scatter(*pts[:, :3].T, **kw)
     if scene.trajectory is not None and len(scene.trajectory):
@@ -389,13 +351,14 @@ def draw_scene(ax: Axes, scene: Scene, calib: Calibration, *, view: str = "bev",
             ax.set_ylim(cv - extent, cv + extent)
         ax.grid(True, lw=0.3, alpha=0.5)
     else:
-        ax.set_zlabel("z [m]")
+        ax3d = cast("Axes3D", ax)  # view="3d" draws into a 3-D axes (see the docstring)
+        ax3d.set_zlabel("z [m]")
         if extent is not None and scene.rig is not None:
             c = scene.rig[0]
-            ax.set_xlim(c[0] - extent, c[0] + extent)
-            ax.set_ylim(c[1] - extent, c[1] + extent)
-            ax.set_zlim(c[2] - extent / 4, c[2] + extent / 4)
-            ax.set_box_aspect((4, 4, 1))
+            ax3d.set_xlim(c[0] - extent, c[0] + extent)
+            ax3d.set_ylim(c[1] - extent, c[1] + extent)
+            ax3d.set_zlim(c[2] - extent / 4, c[2] + extent / 4)
+            ax3d.set_box_aspect((4, 4, 1))
     ax.set_xlabel(li)
     ax.set_ylabel(lj)
     ax.legend(loc="upper right", fontsize="small", markerscale=2)
