@@ -132,20 +132,22 @@ def _clock():
 
 
 def interleaved(jobs: dict, rounds: int) -> dict[str, float]:
-    """Best time per item [ms] of each ``name: (fn, items)`` job.
+    """Time per item [ms] of each ``name: (fn, items)`` job.
 
     The jobs take turns round after round, so that a shared machine's changing load affects
-    all of them alike; the best round of each is kept. The clock is process CPU time with
-    ``--cpu-time`` (everything here is single-threaded), wall time otherwise.
+    all of them alike. Each item keeps its best time over the rounds and a job's time is the
+    mean of its items' best times (a load spike then spoils one item's round, not a whole
+    job's). The clock is process CPU time with ``--cpu-time`` (everything here is
+    single-threaded), wall time otherwise.
     """
-    best = dict.fromkeys(jobs, np.inf)
+    best = {name: np.full(len(items), np.inf) for name, (_, items) in jobs.items()}
     for _ in range(rounds):
         for name, (fn, items) in jobs.items():
-            t0 = _clock()
-            for it in items:
+            for i, it in enumerate(items):
+                t0 = _clock()
                 fn(it)
-            best[name] = min(best[name], (_clock() - t0) / len(items))
-    return {k: v * 1e3 for k, v in best.items()}
+                best[name][i] = min(best[name][i], _clock() - t0)
+    return {k: float(v.mean()) * 1e3 for k, v in best.items()}
 
 
 def floor_jobs(calib, proc: RadarProcessor) -> dict:

@@ -40,6 +40,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.fft as sfft
 
+from ..errors import SettingsError
 from .array import AngleGrid
 
 __all__ = ["CHUNK_SIZE", "ENGINES", "available_engines", "heatmap_from_elements", "resolve_engine"]
@@ -78,13 +79,13 @@ def resolve_engine(engine: str) -> str:
 
     Raises
     ------
-    ValueError
+    SettingsError
         Unknown name.
     ImportError
         ``"numba"`` asked for but numba is not installed.
     """
     if engine not in ENGINES:
-        raise ValueError(f"unknown heatmap engine {engine!r}; expected one of {', '.join(ENGINES)}")
+        raise SettingsError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     if engine == "auto":
         return "numba" if _numba_kernel() is not None else "numpy"
     if engine == "numba" and _numba_kernel() is None:
@@ -178,7 +179,7 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
             else np.asarray(channels)).astype(np.int64)
     m, (_, nd, nr) = chan.size, elements.shape
     if m != grid.num_elements or len(velocities) != nd:
-        raise ValueError(f"elements {elements.shape} do not fit the grid's {grid.num_elements} "
+        raise SettingsError(f"elements {elements.shape} do not fit the grid's {grid.num_elements} "
                          f"elements and {len(velocities)} Doppler bins")
     width = int(grid.az_pos.max()) + 1
     n_rows, n_az, n_el = np.unique(grid.el_pos).size, grid.n_az, grid.num_el
