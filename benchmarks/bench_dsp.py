@@ -17,7 +17,11 @@ and coupling when the calibration has them), prints the time per frame of
   doppler·range·azimuth)``. Every beam value of every cell must be computed (the heatmap is
   a maximum over them), and no cheaper transform produces them; everything else
   (calibration, windows, TDM, gathers, power, Doppler maximum, output layout) is counted as
-  the chain's own cost.
+  the chain's own cost;
+* the detection chain's additions of issue 10 one at a time on top of the plain chain
+  (noise whitening, CFAR excision, Doppler alias search, sidelobe guard) and the
+  disambiguated heatmap (``heatmap_unwrap``) beside the plain heatmap. ``--only detection``
+  runs just these, ``--only heatmap`` just the sections above.
 
 The jobs take turns for ``--repeat`` rounds and each keeps its best round (the machine may be
 shared); times are ms per frame, wall clock (or process CPU time with ``--cpu-time``).
@@ -186,11 +190,40 @@ def floor_jobs(calib, proc: RadarProcessor) -> dict:
     }
 
 
+# ------------------------------------------------------------------ detection additions
+DETECTION_STEPS = (
+    ("plain chain", dict(noise_weighting="off", cfar_excision=False, doppler_unwrap=0.0,
+                         sidelobe_guard=False)),
+    ("+ noise whitening", dict(cfar_excision=False, doppler_unwrap=0.0, sidelobe_guard=False)),
+    ("+ CFAR excision", dict(doppler_unwrap=0.0, sidelobe_guard=False)),
+    ("+ Doppler alias search", dict(sidelobe_guard=False)),
+    ("+ sidelobe guard (default)", {}),
+)
+
+
+def detection_costs(calib, fr: list[np.ndarray], repeat: int) -> None:
+    """Point cloud time with each detection addition switched on in turn, and the
+    disambiguated heatmap beside the plain one (same frames, interleaved rounds)."""
+    jobs = {name: (RadarProcessor(calib, **kw).pointcloud, fr) for name, kw in DETECTION_STEPS}
+    jobs["heatmap"] = (RadarProcessor(calib).heatmap, fr)
+    jobs["heatmap, heatmap_unwrap"] = (RadarProcessor(calib, heatmap_unwrap=True).heatmap, fr)
+    t = interleaved(jobs, repeat)
+    base = t[DETECTION_STEPS[0][0]]
+    print("  -- ADC -> point cloud, detection additions (ms/frame, x plain chain)")
+    for name, _ in DETECTION_STEPS:
+        print(f"  {name:<28s}{t[name]:8.2f}  {t[name] / base:5.2f}x")
+    print(f"  {'heatmap':<28s}{t['heatmap']:8.2f}")
+    print(f"  {'heatmap_unwrap=True':<28s}{t['heatmap, heatmap_unwrap']:8.2f}  "
+          f"{t['heatmap, heatmap_unwrap'] / t['heatmap']:5.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=7, help="rounds (best one kept)")
     ap.add_argument("--calib", type=Path, default=REAL_CALIB)
+    ap.add_argument("--only", choices=("all", "heatmap", "detection"), default="all",
+                    help="run only the heatmap section or the detection-additions section")
     ap.add_argument("--cpu-time", action="store_true",
                     help="measure process CPU time instead of wall time (everything here runs "
                          "on one thread, so on a busy shared machine this is the fairer clock)")
@@ -205,6 +238,10 @@ def main() -> None:
         proc = RadarProcessor(calib)
         proc_np = RadarProcessor(calib, engine="numpy")
         fr = frames(calib, args.frames)
+        if args.only == "detection":
+            print(f"\n== {name} ({what})")
+            detection_costs(calib, fr, args.repeat)
+            continue
         ref = scipy_chain_heatmap(calib, fr[0])
         checks = []
         for label, p in (("default", proc), ("numpy", proc_np)):
@@ -235,6 +272,8 @@ def main() -> None:
         print(f"  baseline / numpy-engine heatmap {base / t['ADC -> heatmap, numpy engine']:6.2f}x")
         print(f"  point cloud / baseline heatmap  {t['ADC -> point cloud'] / base:6.1%}   "
               f"(goal <= 15 %)")
+        if args.only == "all":
+            detection_costs(calib, fr, args.repeat)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ def main() -> None:
 
     # One Ouster scan (65,536 points) into the world frame.
     scan = rng.normal(scale=20, size=(65536, 4)).astype(np.float32)
-    pose = SE3(Rotation.random(rng=rng), rng.normal(size=3))
+    pose = SE3(Rotation.random(None, rng), rng.normal(size=3))
     m = pose.matrix()
     rows.append(("transform 65k-point scan, SE3.apply_to_cloud (float32)",
                  bench(lambda: pose.apply_to_cloud(scan)),
@@ -58,7 +58,7 @@ def main() -> None:
     # Interpolating 10,000 poses out of a 6,000-knot ground truth.
     n = 6000
     traj = Trajectory(1.6e9 + np.arange(n) * 0.1, rng.normal(size=(n, 3)),
-                      Rotation.random(n, rng=rng))
+                      Rotation.random(n, rng))
     tq = np.sort(rng.uniform(traj.start, traj.end, 10_000))
     rows.append(("Trajectory.interpolate_arrays 10k times",
                  bench(lambda: traj.interpolate_arrays(tq)),

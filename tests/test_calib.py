@@ -39,7 +39,7 @@ def test_cascade_unit_defects_are_fixed_with_warnings():
 @needs_reference
 def test_derived_quantities_match_design_numbers(real):
     cas, sc = real.cascade, real.single_chip
-    # c*fs/(2*S*Ns) equals the heatmap range bin width (DESIGN.md §2).
+    # c*fs/(2*S*Ns) equals the heatmap range bin width (docs/conventions.md §2).
     for r in (cas, sc):
         w = r.waveform
         assert w.range_bin_width == pytest.approx(C * w.sample_rate / (2 * w.slope * w.num_samples))
@@ -114,7 +114,7 @@ def test_transforms_and_presets_agree_with_real_files(real):
     assert set(real.transforms) == {"cascade", "single_chip", "lidar", "imu", "vicon"}
     t = real.transforms["cascade"]
     np.testing.assert_allclose(t.translation, [0.03, 0.12, -0.09])
-    # The radar's x axis (boresight) points along the rig's +y (DESIGN.md §3).
+    # The radar's x axis (boresight) points along the rig's +y (docs/conventions.md §3).
     np.testing.assert_allclose(t.matrix()[:3, 0], [0, 1, 0], atol=2e-3)
     preset = cb.preset_calibration()
     for name in ("cascade", "single_chip"):

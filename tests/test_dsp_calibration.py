@@ -1,4 +1,4 @@
-"""Phase/frequency calibration and coupling subtraction (DESIGN.md §2)."""
+"""Phase/frequency calibration and coupling subtraction (docs/conventions.md §2)."""
 
 from __future__ import annotations
 

@@ -23,7 +23,7 @@ T0 = 1_608_580_000.5
 
 
 def _write_run(root: Path) -> Path:
-    """Run folder (DESIGN.md §1) with cascade frames numbered from 0 and single-chip from 1."""
+    """Run folder (docs/conventions.md §1) with cascade frames numbered from 0 and single-chip from 1."""
     run = root / "12_21_2020_ec_hallways_run0"
     calib = preset_calibration()
     write_calibration(calib, root / "calib")

@@ -200,7 +200,7 @@ def test_truth_matches_the_run_geometry(run):
             world = tg["position"][static] @ w_T[i, :3, :3].T + w_T[i, :3, 3]
             np.testing.assert_allclose(world, truth["static_position"][tg["ident"][static]],
                                        atol=1e-4)
-            # Static scatterers close in at −û·v (DESIGN.md §3: > 0 receding).
+            # Static scatterers close in at −û·v (docs/conventions.md §3: > 0 receding).
             p = tg["position"][static].astype(np.float64)
             rr = -(p @ v[i]) / np.linalg.norm(p, axis=1)
             np.testing.assert_allclose(tg["range_rate"][static], rr, atol=1e-4)

@@ -10,7 +10,7 @@ Output (mirroring a run, one folder per radar and product)::
 ``<i>`` is the ADC frame's own file number and line ``j`` of ``timestamps.txt`` is the
 timestamp of frame ``base + j``, written up to the last frame complete on disk, with ``base``
 = 1 when the first complete frame is number 1 and 0 otherwise — the rule readers use to pair
-lines with files (DESIGN.md §1) — so the folders read back like the dataset's own streams
+lines with files (docs/conventions.md §1) — so the folders read back like the dataset's own streams
 whatever frame range was processed. Lines of frames without an ADC timestamp (before a
 1-based run's first frame, or missing from the run) hold ``nan``. ``heatmap_cfg.txt`` lists
 the true angles of the bins (:meth:`coloradar.dsp.RadarProcessor.heatmap_config`).

@@ -1,7 +1,7 @@
 """Antenna layout (``antenna_cfg.txt``) and the MIMO virtual array.
 
 Positions are in half wavelengths at the design frequency ``F_design``: the ``az`` coordinate
-grows toward the radar's +y (left), ``el`` toward +z (up) (DESIGN.md §3). Cascade (MMWCAS-RF-EVM)
+grows toward the radar's +y (left), ``el`` toward +z (up) (docs/conventions.md §3). Cascade (MMWCAS-RF-EVM)
 virtual array, azimuth along →, elevation ↑ (each ``o`` one unique virtual element)::
 
     el 6 |           oooo…

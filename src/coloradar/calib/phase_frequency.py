@@ -3,7 +3,7 @@
 The four chips of the cascade board have their own LO paths: each (TX, RX) channel has a
 phase offset and a small delay, measured on a corner reflector at about 3 m. The file gives, per
 channel, the reflector's (fractional) range bin ``f[t, r]`` (≈ 51) and the complex phase
-``P[t, r]``. The correction is relative to channel (tx 0, rx 0) (DESIGN.md §2)::
+``P[t, r]``. The correction is relative to channel (tx 0, rx 0) (docs/conventions.md §2)::
 
     A_fcal[n] = A[n] · exp(−j2π (f[t,r] − f[0,0]) · (S/S_cal)·(fs_cal/fs) · n / Ns)
     A_pcal    = A_fcal · P[0,0] / P[t,r]

@@ -1,7 +1,7 @@
 """Extrinsics (``transforms/base_to_<sensor>.txt``): the pose of each sensor in the rig's base frame.
 
 ``base_to_<sensor>`` maps sensor coordinates into base coordinates:
-``p_base = R(q) · p_sensor + t`` (DESIGN.md §3). The base frame is the ENU-aligned rig frame
+``p_base = R(q) · p_sensor + t`` (docs/conventions.md §3). The base frame is the ENU-aligned rig frame
 (x right, y forward, z up).
 """
 

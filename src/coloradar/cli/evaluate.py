@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..odometry import evaluate_odometry, format_evaluation, write_evaluation
-from ..odometry.metrics import ALIGNMENTS
+from ..odometry.metrics import ALIGNMENTS, RPE_PAIRINGS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,6 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="trajectory alignment before the ATE (default se3: Umeyama)")
     p.add_argument("--distances", type=float, nargs="+", default=[1.0, 2.0, 5.0],
                    metavar="M", help="RPE segment lengths in metres (default 1 2 5)")
+    p.add_argument("--rpe-pairing", choices=RPE_PAIRINGS, default="every_pose",
+                   help="RPE pose pairs: every_pose (default: a pair from every pose), evo "
+                        "(evo_rpe -u m: consecutive segments) or evo_all_pairs (--all_pairs)")
     p.add_argument("--no-plot", action="store_true", help="do not write evaluation.png")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier evaluation")
     p.set_defaults(func=run)
@@ -31,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     ev = evaluate_odometry(args.dir, args.run, calib=args.calib, align=args.align,
-                           distances=tuple(args.distances))
+                           distances=tuple(args.distances), rpe_pairing=args.rpe_pairing)
     files = write_evaluation(ev, args.dir, plot=not args.no_plot, overwrite=args.overwrite)
     print(format_evaluation(ev), end="")
     for path in files:

@@ -7,6 +7,7 @@ import re
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import SupportsIndex, overload
 
 import numpy as np
 
@@ -128,13 +129,18 @@ class FrameStream:
                                   f"(the stream has {n} frames: 0..{n - 1}, or -{n}..-1)")
         return k % n
 
-    def __getitem__(self, key):
+    @overload
+    def __getitem__(self, key: SupportsIndex) -> np.ndarray: ...
+    @overload
+    def __getitem__(self, key: slice) -> FrameStream: ...
+    def __getitem__(self, key: SupportsIndex | slice) -> np.ndarray | FrameStream:
+        """Frame ``key`` decoded (an int), or a stream over a slice of the frames (nothing read)."""
         if isinstance(key, slice):
             idx = range(len(self._paths))[key]
             return FrameStream(self.name, self._source, [self._paths[i] for i in idx],
                                self.timestamps[key], self.frame_ids[key], self._decode,
                                self.issues)
-        return self.read(key)
+        return self.read(operator.index(key))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for k in range(len(self)):

@@ -18,8 +18,26 @@ See ``docs/dsp.md`` for the chain, conventions and choices.
 """
 
 from .angle import bartlett_spectrum, capon_spectrum, covariance, refine_peak
-from .array import OVERLAP_MODES, AngleGrid, angle_grid, beamform, combine_channels, sines_to_unit
-from .cfar import CFAR_KINDS, CFARResult, cfar, cfar_scale, cfar_window, false_alarm_rate
+from .array import (
+    OVERLAP_MODES,
+    AngleGrid,
+    OverlapMode,
+    angle_grid,
+    beamform,
+    combine_channels,
+    sines_to_unit,
+)
+from .cfar import (
+    CFAR_EDGES,
+    CFAR_KINDS,
+    CFAREdge,
+    CFARKind,
+    CFARResult,
+    cfar,
+    cfar_scale,
+    cfar_window,
+    false_alarm_rate,
+)
 from .cube import (
     apply_phase_frequency_calibration,
     coupling_signal,
@@ -38,24 +56,40 @@ from .points import (
     default_point_source,
     radar_point_stream,
 )
-from .processor import ProcessingSettings, RadarProcessor
+from .processor import (
+    ANGLE_METHODS,
+    COUPLING_DOMAINS,
+    AngleMethod,
+    CouplingDomain,
+    ProcessingSettings,
+    RadarProcessor,
+)
 from .signs import SignMatch, match_sign_convention
 from .tdm import compensate_tdm, tdm_phase
-from .windows import WINDOWS, coherent_window, window
+from .windows import WINDOWS, WindowName, coherent_window, window
 
 __all__ = [
+    "ANGLE_METHODS",
+    "CFAR_EDGES",
     "CFAR_KINDS",
+    "COUPLING_DOMAINS",
     "OVERLAP_MODES",
     "POINT_SOURCES",
     "WINDOWS",
     "AngleGrid",
+    "AngleMethod",
+    "CFAREdge",
+    "CFARKind",
     "CFARResult",
+    "CouplingDomain",
     "Detections",
     "FramePoints",
+    "OverlapMode",
     "PointSource",
     "ProcessingSettings",
     "RadarProcessor",
     "SignMatch",
+    "WindowName",
     "angle_grid",
     "apply_phase_frequency_calibration",
     "bartlett_spectrum",

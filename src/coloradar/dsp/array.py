@@ -1,6 +1,6 @@
 """Stage 5: the MIMO virtual array on the heatmap's azimuth × elevation FFT grid.
 
-Physics (DESIGN.md §3, :mod:`coloradar.sim.radar_if`): a virtual element at ``(p, q)`` half
+Physics (docs/conventions.md §3, :mod:`coloradar.sim.radar_if`): a virtual element at ``(p, q)`` half
 wavelengths of ``F_design`` sees a far target in direction ``u = (u_x, u_y, u_z)`` with phase
 ``exp(−jπ·ρ·(s_a·p·u_y + s_e·q·u_z))`` relative to the origin, where ``ρ = f_c/F_design``
 (carrier at mid-sampling over design frequency), ``u_y = cos(el)·sin(az)``, ``u_z = sin(el)``
@@ -18,6 +18,7 @@ so the true bin angles are ``el_j = asin(u_z,j)`` and, in the ``el = 0`` plane,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
@@ -25,9 +26,12 @@ import scipy.fft as sfft
 from ..calib import AntennaConfig, VirtualArray
 from ..errors import CalibrationError, SettingsError
 
-__all__ = ["OVERLAP_MODES", "AngleGrid", "angle_grid", "beamform", "combine_channels", "sines_to_unit"]
+__all__ = ["OVERLAP_MODES", "AngleGrid", "OverlapMode", "angle_grid", "beamform", "combine_channels",
+           "sines_to_unit"]
 
-OVERLAP_MODES = ("first", "average")
+OverlapMode = Literal["first", "average"]
+"""Virtual pairs sharing a position: keep the TX-major first one, or average them."""
+OVERLAP_MODES: tuple[OverlapMode, ...] = get_args(OverlapMode)
 """How (TX, RX) pairs sharing a virtual position are combined."""
 
 
@@ -137,7 +141,7 @@ def angle_grid(antenna: AntennaConfig, carrier_frequency: float, num_el: int, nu
     num_el, num_az
         Output bins (the heatmap's, or more for finer detection angles).
     azimuth_sign, elevation_sign
-        +1 or −1 (DESIGN.md §3).
+        +1 or −1 (docs/conventions.md §3).
     """
     if azimuth_sign not in (1, -1) or elevation_sign not in (1, -1):
         raise SettingsError("azimuth_sign and elevation_sign must be +1 or -1")
@@ -155,7 +159,8 @@ def angle_grid(antenna: AntennaConfig, carrier_frequency: float, num_el: int, nu
                      el_sines, az_sines)
 
 
-def combine_channels(cube: np.ndarray, virtual: VirtualArray, mode: str = "first") -> np.ndarray:
+def combine_channels(cube: np.ndarray, virtual: VirtualArray, mode: OverlapMode = "first"
+                     ) -> np.ndarray:
     """One signal per unique virtual position from a ``(tx, rx, ...)`` cube.
 
     Parameters

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from ..calib import CouplingCalib, PhaseFrequencyCalib, WaveformConfig
-from .windows import coherent_window
+from .windows import WindowName, coherent_window
 
 __all__ = [
     "apply_phase_frequency_calibration",
@@ -54,7 +54,7 @@ def remove_dc(adc: np.ndarray) -> np.ndarray:
 
 
 def phase_frequency_factors(pf: PhaseFrequencyCalib, waveform: WaveformConfig) -> np.ndarray:
-    """Per-channel, per-sample factors that apply the cascade calibration (DESIGN.md §2).
+    """Per-channel, per-sample factors that apply the cascade calibration (docs/conventions.md §2).
 
     ``G[t, r, n] = P[0,0]/P[t,r] · exp(−j2π (f[t,r] − f[0,0]) · (S/S_cal)·(fs_cal/fs) · n/Ns)``:
     the frequency term moves every channel's beat frequency onto the reference channel's
@@ -122,7 +122,7 @@ def coupling_taper(k: int) -> np.ndarray:
     return taper
 
 
-def range_fft(cube: np.ndarray, window: str = "hann", n: int | None = None,
+def range_fft(cube: np.ndarray, window: WindowName = "hann", n: int | None = None,
               keep: int | None = None, workers: int = 1) -> np.ndarray:
     """Windowed range FFT over samples, scaled to unit coherent gain.
 
@@ -155,7 +155,7 @@ def signed_doppler_bins(n: int) -> np.ndarray:
     return np.arange(n) - n // 2
 
 
-def doppler_fft(rcube: np.ndarray, window: str = "hann", n: int | None = None,
+def doppler_fft(rcube: np.ndarray, window: WindowName = "hann", n: int | None = None,
                 axis: int = -2, workers: int = 1) -> np.ndarray:
     """Windowed Doppler FFT over chirp loops, zero Doppler centred, unit coherent gain.
 

@@ -1,6 +1,6 @@
 """Which azimuth/elevation sign convention matches a sensor's own point clouds.
 
-The antenna file's axes could be mirrored relative to the radar frame (DESIGN.md §3). The
+The antenna file's axes could be mirrored relative to the radar frame (docs/conventions.md §3). The
 single-chip sensor shipped its own detections (``single_chip/pointclouds``) for the same frames
 as its ADC data; processing the ADC frames under each of the four sign choices and measuring
 how far our points lie from the sensor's tells which choice is right.

@@ -7,18 +7,21 @@ what makes the coupling subtraction of :mod:`coloradar.dsp.cube` exact for any w
 
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 import numpy as np
 from scipy.signal import get_window
 
 from ..errors import SettingsError
 
-__all__ = ["WINDOWS", "coherent_window", "window"]
+__all__ = ["WINDOWS", "WindowName", "coherent_window", "window"]
 
-WINDOWS = ("hann", "blackman", "none")
+WindowName = Literal["hann", "blackman", "none"]
 """Names accepted wherever a window is a setting."""
+WINDOWS: tuple[WindowName, ...] = get_args(WindowName)
 
 
-def window(name: str, n: int) -> np.ndarray:
+def window(name: WindowName, n: int) -> np.ndarray:
     """The periodic window ``name`` of length ``n``.
 
     Parameters
@@ -40,7 +43,7 @@ def window(name: str, n: int) -> np.ndarray:
     return get_window(name, n, fftbins=True).astype(np.float64)
 
 
-def coherent_window(name: str, n: int) -> np.ndarray:
+def coherent_window(name: WindowName, n: int) -> np.ndarray:
     """``window(name, n)`` scaled to unit coherent gain (its samples sum to 1).
 
     An FFT of a windowed tone of amplitude ``a`` at a bin centre then peaks at exactly ``a``,

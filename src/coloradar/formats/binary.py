@@ -1,6 +1,6 @@
 """Binary data files of ColoRadar: ADC frames, heatmaps, radar and lidar point clouds.
 
-All are little-endian with no header (DESIGN.md §1). Decoders take the raw bytes so that folders
+All are little-endian with no header (docs/conventions.md §1). Decoders take the raw bytes so that folders
 and zips share one code path; ``read_*`` helpers read a path directly.
 """
 

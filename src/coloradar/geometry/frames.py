@@ -1,6 +1,6 @@
 """Sensor extrinsics and moving point clouds between the sensor, base and world frames.
 
-Frames (DESIGN.md §3):
+Frames (docs/conventions.md §3):
 
 - ``<sensor>``: each sensor's own frame; the radars' is x boresight, y left, z up.
 - ``base``: the rig frame (x right, y forward, z up); ``calib/transforms/base_to_<sensor>.txt``

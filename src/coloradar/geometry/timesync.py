@@ -1,6 +1,6 @@
 """Putting streams on one timeline: nearest-neighbour association and time windows.
 
-Every ColoRadar stream has its own clock samples and count (DESIGN.md §1), so frames of two
+Every ColoRadar stream has its own clock samples and count (docs/conventions.md §1), so frames of two
 sensors are paired by time. All functions here sort once and use :func:`numpy.searchsorted`:
 O((N + M) log M), never an N x M distance table.
 """

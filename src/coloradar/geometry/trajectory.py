@@ -286,7 +286,7 @@ def trajectory_from_groundtruth(seq, source: str = "groundtruth") -> Trajectory:
     """``world_T_base(t)`` of a run from its ground truth (or ``source="vicon"``).
 
     The dataset's ground-truth poses are the rig's base frame in a world frame fixed at the
-    run's start pose (DESIGN.md §1).
+    run's start pose (docs/conventions.md §1).
 
     Parameters
     ----------

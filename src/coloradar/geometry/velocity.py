@@ -130,7 +130,7 @@ def static_range_rate(points: np.ndarray, sensor_velocity: np.ndarray) -> np.nda
     Returns
     -------
     numpy.ndarray
-        float ``(N,)`` [m/s], ``−û·v``: negative when the sensor closes in (DESIGN.md §3).
+        float ``(N,)`` [m/s], ``−û·v``: negative when the sensor closes in (docs/conventions.md §3).
     """
     p = np.asarray(points)
     dtype = p.dtype if p.dtype in (np.float32, np.float64) else np.float64

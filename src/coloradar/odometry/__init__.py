@@ -37,7 +37,9 @@ from .evaluation import (
     write_evaluation,
 )
 from .metrics import (
+    RPE_PAIRINGS,
     ATEResult,
+    RPEPairing,
     RPEResult,
     VelocityErrors,
     absolute_trajectory_error,
@@ -45,6 +47,7 @@ from .metrics import (
     associate_trajectories,
     path_length,
     relative_pose_error,
+    rpe_pairs,
     velocity_errors,
 )
 from .pipeline import (
@@ -69,6 +72,7 @@ from .velocity_track import (
 __all__ = [
     "EVALUATION_FILES",
     "ORIENTATION_SOURCES",
+    "RPE_PAIRINGS",
     "SOURCES",
     "ATEResult",
     "Alignment",
@@ -77,6 +81,7 @@ __all__ = [
     "EgoVelocityTrack",
     "Evaluation",
     "OdometryOutput",
+    "RPEPairing",
     "RPEResult",
     "VelocityErrors",
     "absolute_trajectory_error",
@@ -104,6 +109,7 @@ __all__ = [
     "read_tum",
     "read_velocity_table",
     "relative_pose_error",
+    "rpe_pairs",
     "run_ego_velocity",
     "run_odometry",
     "static_inlier_threshold",

@@ -26,6 +26,7 @@ velocity-only error, an upper bound on what better attitude could give.
 from __future__ import annotations
 
 import warnings
+from typing import Literal, get_args
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -37,6 +38,7 @@ from .velocity_track import EgoVelocityTrack
 
 __all__ = [
     "ORIENTATION_SOURCES",
+    "OrientationSource",
     "cumulative_rotations",
     "dead_reckon",
     "estimate_gyro_bias",
@@ -44,7 +46,9 @@ __all__ = [
     "radar_inertial_odometry",
 ]
 
-ORIENTATION_SOURCES = ("imu", "groundtruth")
+OrientationSource = Literal["imu", "groundtruth"]
+"""Where the attitude comes from: integrated gyro, or the ground truth (an upper bound)."""
+ORIENTATION_SOURCES: tuple[OrientationSource, ...] = get_args(OrientationSource)
 
 
 def cumulative_rotations(deltas: Rotation) -> Rotation:
@@ -167,7 +171,7 @@ def _attitude_from_gyro(times: np.ndarray, imu_t: np.ndarray, imu_rates: np.ndar
 
 
 def radar_inertial_odometry(track: EgoVelocityTrack, calib: Calibration, *,
-                            orientation: str = "imu",
+                            orientation: OrientationSource = "imu",
                             imu_timestamps: np.ndarray | None = None,
                             imu_rates: np.ndarray | None = None,
                             groundtruth: Trajectory | None = None,

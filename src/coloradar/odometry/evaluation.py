@@ -20,11 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FormatError, MissingDataError, OutputExistsError
-from ..formats.atomic import atomic_write_text
+from ..formats.atomic import atomic_write_text, make_output_dir
 from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .metrics import (
+    Align,
     ATEResult,
+    RPEPairing,
     RPEResult,
     VelocityErrors,
     absolute_trajectory_error,
@@ -79,8 +81,9 @@ class Evaluation:
 
 def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
                         track: EgoVelocityTrack | None = None, calib=None,
-                        align: str = "se3", distances: tuple[float, ...] = (1.0, 2.0, 5.0),
-                        max_gap: float | None = 1.0, info: dict | None = None) -> Evaluation:
+                        align: Align = "se3", distances: tuple[float, ...] = (1.0, 2.0, 5.0),
+                        max_gap: float | None = 1.0, info: dict | None = None,
+                        rpe_pairing: RPEPairing = "every_pose") -> Evaluation:
     """ATE, RPE and (with ``track`` and ``calib``) ego-velocity errors of an estimate.
 
     Parameters
@@ -94,15 +97,20 @@ def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
     align, distances, max_gap
         See :func:`~coloradar.odometry.absolute_trajectory_error` and
         :func:`~coloradar.odometry.relative_pose_error`.
+    rpe_pairing
+        The RPE's pose pairs (``pairing`` of :func:`~coloradar.odometry.relative_pose_error`;
+        ``"evo"`` gives the pairs of ``evo_rpe -d D -u m``).
     info
         Extra fields for :attr:`Evaluation.info`.
     """
     ate = absolute_trajectory_error(estimate, reference, align=align, max_gap=max_gap)
-    rpe = relative_pose_error(estimate, reference, distances, max_gap=max_gap)
+    rpe = relative_pose_error(estimate, reference, distances, max_gap=max_gap,
+                              pairing=rpe_pairing)
     vel = None
     if track is not None and calib is not None:
         vel = velocity_errors(track, reference, calib)
-    meta = {"align": align, "distances": [float(d) for d in distances], **(info or {})}
+    meta = {"align": align, "distances": [float(d) for d in distances],
+            "rpe_pairing": rpe_pairing, **(info or {})}
     return Evaluation(estimate, reference, ate, rpe, vel, track, meta)
 
 
@@ -118,9 +126,10 @@ def _calib_for(info: dict, calib):
 
 
 def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str] | None = None,
-                      *, calib=None, align: str = "se3",
+                      *, calib=None, align: Align = "se3",
                       distances: tuple[float, ...] = (1.0, 2.0, 5.0),
-                      max_gap: float | None = 1.0) -> Evaluation:
+                      max_gap: float | None = 1.0,
+                      rpe_pairing: RPEPairing = "every_pose") -> Evaluation:
     """Evaluate an odometry output folder against its run's ground truth.
 
     Parameters
@@ -132,7 +141,7 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
     calib
         Calibration (object or path); default: the one the odometry used, else the one found
         beside the run.
-    align, distances, max_gap
+    align, distances, max_gap, rpe_pairing
         See :func:`evaluate_trajectory`.
 
     Returns
@@ -170,7 +179,8 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
     meta = {k: info[k] for k in ("radar", "source", "orientation") if k in info}
     meta.update(run=str(run), run_name=seq.name, folder=str(folder))
     return evaluate_trajectory(estimate, reference, track=track, calib=seq.calib, align=align,
-                               distances=distances, max_gap=max_gap, info=meta)
+                               distances=distances, max_gap=max_gap, info=meta,
+                               rpe_pairing=rpe_pairing)
 
 
 def _f(x: float) -> float | None:
@@ -249,7 +259,7 @@ def write_evaluation(ev: Evaluation, folder: str | os.PathLike[str], *, plot: bo
     if existing and not overwrite:
         raise OutputExistsError(f"{folder}: holds {', '.join(existing)} already; pass "
                                 "overwrite=True (--overwrite) to replace them")
-    folder.mkdir(parents=True, exist_ok=True)
+    make_output_dir(folder)
     written = []
     atomic_write_text(folder / names[0], json.dumps(evaluation_dict(ev), indent=2) + "\n")
     atomic_write_text(folder / names[1], format_evaluation(ev))

@@ -14,17 +14,29 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
   walk leave the roll about the path undetermined, and Umeyama's rotation would then show up
   as a large, meaningless attitude error. With ``origin`` or ``none`` alignment ``R_a`` is that
   alignment's rotation.
-- **RPE** over distance ``d``: for every pose ``i``, ``j`` is the first later pose at which the
-  reference has travelled at least ``d`` metres along its path; the error of the relative
-  motion is ``E = (ref_i⁻¹ ref_j)⁻¹ (est_i⁻¹ est_j)``. Translation error in percent is
-  ``100 · |t_E| / d`` and rotation error ``angle(E) / d`` in deg/m, averaged over the pairs
-  (the KITTI devkit's numbers; it uses d = 100…800 m for cars, 1, 2, 5 m suit a hand-held rig
-  indoors). RPE needs no alignment.
+- **RPE** over distance ``d``: the error of the relative motion of a pose pair ``(i, j)`` is
+  ``E = (ref_i⁻¹ ref_j)⁻¹ (est_i⁻¹ est_j)``. Translation error in percent is ``100 · |t_E| / d``
+  and rotation error ``angle(E) / d`` in deg/m, averaged over the pairs (the KITTI devkit's
+  numbers; it uses d = 100…800 m for cars, 1, 2, 5 m suit a hand-held rig indoors). RPE needs
+  no alignment. The pairs, all measured along the reference's path length ``L``
+  (``pairing``):
+
+  * ``"every_pose"`` (default): every pose ``i`` starts a pair; ``j`` is the first pose with
+    ``L_j − L_i ≥ d`` (KITTI's rule, with a start at every pose instead of every 10th).
+  * ``"evo"``: what ``evo_rpe -d D -u m`` uses: consecutive, non-overlapping segments. The
+    walk starts at the first pose; each segment ends at the first pose whose path length from
+    the previous segment end reaches ``d``. The segment ends are the pair members, so the
+    first pair starts at the *first segment end*, not at pose 0 (evo's
+    ``filter_pairs_by_path``).
+  * ``"evo_all_pairs"``: ``evo_rpe … --all_pairs``: every pose ``i`` whose best partner ``j``
+    (``L_j − L_i`` nearest to ``d``, the earlier pose on a tie) lies within the relative
+    tolerance: ``|L_j − L_i − d| ≤ tolerance · d`` (evo's default tolerance is 0.1).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -36,7 +48,9 @@ from .alignment import Alignment, umeyama_alignment
 from .velocity_track import EgoVelocityTrack
 
 __all__ = [
+    "RPE_PAIRINGS",
     "ATEResult",
+    "RPEPairing",
     "RPEResult",
     "VelocityErrors",
     "absolute_trajectory_error",
@@ -44,10 +58,16 @@ __all__ = [
     "associate_trajectories",
     "path_length",
     "relative_pose_error",
+    "rpe_pairs",
     "velocity_errors",
 ]
 
-ALIGNMENTS = ("se3", "sim3", "origin", "none")
+Align = Literal["se3", "sim3", "origin", "none"]
+ALIGNMENTS: tuple[Align, ...] = get_args(Align)
+
+RPEPairing = Literal["every_pose", "evo", "evo_all_pairs"]
+"""How :func:`relative_pose_error` pairs poses (see the module docstring)."""
+RPE_PAIRINGS: tuple[RPEPairing, ...] = get_args(RPEPairing)
 
 
 def path_length(positions: np.ndarray) -> np.ndarray:
@@ -154,7 +174,7 @@ class ATEResult:
 
 
 def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
-                              align: str = "se3", max_gap: float | None = 1.0) -> ATEResult:
+                              align: Align = "se3", max_gap: float | None = 1.0) -> ATEResult:
     """ATE of ``estimate`` against ``reference`` (e.g. the ground truth).
 
     Parameters
@@ -205,18 +225,22 @@ class RPEResult:
     ----------
     distance
         Segment length ``d`` [m].
-    start_times
-        float64 ``(K,)`` [s]: first pose of each pair.
+    start_times, end_times
+        float64 ``(K,)`` [s]: first and second pose of each pair.
     translation_errors
         float64 ``(K,)`` [m]: ``|t_E|``.
     rotation_errors
         float64 ``(K,)`` [deg]: ``angle(E)``.
+    pairing
+        How the pairs were chosen (:data:`RPEPairing`).
     """
 
     distance: float
     start_times: np.ndarray
+    end_times: np.ndarray
     translation_errors: np.ndarray
     rotation_errors: np.ndarray
+    pairing: RPEPairing = "every_pose"
 
     @property
     def pairs(self) -> int:
@@ -254,9 +278,71 @@ def _relative(traj: Trajectory, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarra
     return ri_inv.apply(traj.translations[j] - traj.translations[i]), ri_inv * traj.rotations[j]
 
 
+def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_pose", *,
+              tolerance: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``(i, j)`` of poses about ``distance`` apart along a path.
+
+    Parameters
+    ----------
+    path
+        float64 ``(N,)`` [m]: cumulative path length of the reference (:func:`path_length`),
+        non-decreasing.
+    distance
+        ``d`` [m], positive.
+    pairing
+        ``"every_pose"``, ``"evo"`` or ``"evo_all_pairs"`` (see the module docstring).
+    tolerance
+        Relative tolerance of ``"evo_all_pairs"``.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray)
+        int64 ``(K,)`` each: first and second pose of each pair, ``i < j``.
+    """
+    dist = np.asarray(path, dtype=np.float64)
+    d = float(distance)
+    if not d > 0:
+        raise SettingsError(f"RPE distances must be positive, got {distance}")
+    if pairing not in RPE_PAIRINGS:
+        raise SettingsError(f"pairing must be one of {', '.join(RPE_PAIRINGS)}, got {pairing!r}")
+    n = dist.size
+    # A hair of slack so that exact multiples of the pose spacing are not pushed one pose
+    # further by rounding of the cumulative sum.
+    slack = 1e-9 * max(1.0, d)
+    if pairing == "every_pose":
+        # First j with dist[j] >= dist[i] + d.
+        j = np.searchsorted(dist, dist + d - slack, side="left")
+        i = np.flatnonzero(j < n)
+        return i.astype(np.int64), j[i].astype(np.int64)
+    if pairing == "evo":
+        # Segment ends: the first pose with dist >= d, then each next pose at least d further
+        # along the path than the previous end. One search per segment, not per pose.
+        ends: list[int] = []
+        k = int(np.searchsorted(dist, d - slack, side="left")) if n else 0
+        while k < n:
+            ends.append(k)
+            k = int(np.searchsorted(dist, dist[k] + d - slack, side="left"))
+        e = np.asarray(ends, dtype=np.int64)
+        return e[:-1], e[1:]
+    if not 0 <= tolerance < 1:
+        raise SettingsError(f"tolerance must lie in [0, 1), got {tolerance!r}")
+    if n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    target = dist + d
+    above = np.minimum(np.searchsorted(dist, target, side="left"), n - 1)  # first >= target
+    below = np.maximum(above - 1, 0)
+    j = np.where(np.abs(dist[above] - target) < np.abs(dist[below] - target), above, below)
+    # On a standstill (equal path lengths) the earliest pose of the run of equals.
+    j = np.searchsorted(dist, dist[j], side="left")
+    ok = (np.abs(dist[j] - target) <= tolerance * d + slack) & (j > np.arange(n))
+    i = np.flatnonzero(ok)
+    return i.astype(np.int64), j[i].astype(np.int64)
+
+
 def relative_pose_error(estimate: Trajectory, reference: Trajectory,
                         distances: tuple[float, ...] | list[float] = (1.0, 2.0, 5.0), *,
-                        max_gap: float | None = 1.0) -> list[RPEResult]:
+                        max_gap: float | None = 1.0, pairing: RPEPairing = "every_pose",
+                        tolerance: float = 0.1) -> list[RPEResult]:
     """RPE over fixed travelled distances (KITTI / evo convention, see the module docstring).
 
     Parameters
@@ -267,6 +353,11 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
         Segment lengths [m].
     max_gap
         See :func:`associate_trajectories`.
+    pairing
+        ``"every_pose"`` (default), ``"evo"`` (the pairs of ``evo_rpe -d D -u m``) or
+        ``"evo_all_pairs"`` (``evo_rpe -d D -u m --all_pairs``); see :func:`rpe_pairs`.
+    tolerance
+        Relative path-length tolerance of ``"evo_all_pairs"`` (evo's default 0.1).
 
     Returns
     -------
@@ -277,20 +368,17 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
     dist = path_length(ref.translations)
     out = []
     for d in distances:
-        d = float(d)
-        if not d > 0:
-            raise SettingsError(f"RPE distances must be positive, got {d}")
-        # First j with dist[j] >= dist[i] + d; a hair of slack so that exact multiples of the
-        # pose spacing are not pushed one pose further by rounding of the cumulative sum.
-        j = np.searchsorted(dist, dist + d - 1e-9 * max(1.0, d), side="left")
-        i = np.flatnonzero(j < dist.size)
-        j = j[i]
-        te, re = _relative(est, i, j)
-        tr, rr = _relative(ref, i, j)
-        rr_inv = rr.inv()
-        err_t = np.linalg.norm(rr_inv.apply(te - tr), axis=1) if i.size else np.zeros(0)
-        err_r = np.degrees((rr_inv * re).magnitude()) if i.size else np.zeros(0)
-        out.append(RPEResult(d, est.timestamps[i], err_t, err_r))
+        i, j = rpe_pairs(dist, d, pairing, tolerance=tolerance)
+        if i.size:
+            te, re = _relative(est, i, j)
+            tr, rr = _relative(ref, i, j)
+            rr_inv = rr.inv()
+            err_t = np.linalg.norm(rr_inv.apply(te - tr), axis=1)
+            err_r = np.degrees((rr_inv * re).magnitude())
+        else:   # no pair (a run shorter than d); SciPy 1.11 cannot make an empty Rotation
+            err_t = err_r = np.zeros(0)
+        out.append(RPEResult(float(d), est.timestamps[i], est.timestamps[j], err_t, err_r,
+                             pairing))
     return out
 
 

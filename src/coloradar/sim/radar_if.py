@@ -1,6 +1,6 @@
 """Physics forward model of a TDM-MIMO FMCW radar: point scatterers -> raw ADC frame.
 
-The IF (beat) signal of TI's complex baseband (DESIGN.md §3) for a scatterer with round-trip
+The IF (beat) signal of TI's complex baseband (docs/conventions.md §3) for a scatterer with round-trip
 delay τ is ``exp(+j2π(S·τ·t + f0·τ))``: a longer delay is a higher beat frequency and a larger
 phase. For scatterer k, TX t, RX r, chirp loop c and sample n::
 
@@ -18,6 +18,8 @@ block of scatterers.
 """
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 
@@ -58,7 +60,7 @@ def synthesize_adc(
     rng: np.random.Generator | int | None = None,
     azimuth_sign: float = 1.0,
     elevation_sign: float = 1.0,
-    precision: str = "double",
+    precision: Literal["double", "single"] = "double",
     block: int = 1024,
 ) -> np.ndarray:
     """Synthesize one ADC frame of point scatterers (no quantisation, no channel errors).
@@ -144,7 +146,7 @@ def synthesize_adc(
 def apply_channel_errors(adc: np.ndarray, errors: PhaseFrequencyCalib) -> np.ndarray:
     """Impose the per-channel errors that a cascade phase/frequency calibration describes.
 
-    Channel (t, r) gets the delay and complex gain that the calibration removes (DESIGN.md §2):
+    Channel (t, r) gets the delay and complex gain that the calibration removes (docs/conventions.md §2):
     ``x[n] · (P[t,r]/P[0,0]) · exp(+j2π (f[t,r] − f[0,0]) · n / Ns)``, assuming the capture's
     slope and sampling rate equal the frame's. Applying this and then the calibration gives the
     input back.

@@ -16,6 +16,7 @@ under or over the origins, like a floor). The result is the same; the work drops
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -84,7 +85,7 @@ class RectArrays:
 
 
 def cast_rays(origins: np.ndarray, directions: np.ndarray, rects: RectArrays,
-              t_min: float = 1e-6, block: int = 8192, method: str = "auto"
+              t_min: float = 1e-6, block: int = 8192, method: Literal["auto", "sectors", "dense"] = "auto"
               ) -> tuple[np.ndarray, np.ndarray]:
     """First hit of every ray.
 
@@ -111,6 +112,8 @@ def cast_rays(origins: np.ndarray, directions: np.ndarray, rects: RectArrays,
     index : numpy.ndarray
         int64 ``(G, B)``: index of the rectangle hit, -1 for none.
     """
+    if method not in ("auto", "sectors", "dense"):   # an unknown name would mean "dense"
+        raise SettingsError(f"cast_rays: method must be 'auto', 'sectors' or 'dense', got {method!r}")
     o = np.asarray(origins, dtype=np.float64)
     d = np.asarray(directions, dtype=np.float64)
     g_count, b_count = d.shape[:2]
@@ -139,10 +142,12 @@ def cast_rays(origins: np.ndarray, directions: np.ndarray, rects: RectArrays,
         c_u = np.einsum("gmk,gmk->gm", r.center, r.u)[:, None, :]
         c_v = np.einsum("gmk,gmk->gm", r.center, r.v)[:, None, :]
         dn = dd @ n_t                                          # (g, B, M)
+        # A ray parallel to a plane gives t = ±inf (or NaN) and in-plane offsets of inf·0 = NaN:
+        # no hit, since NaN fails every comparison below.
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (c_n - oc @ n_t) / dn
-        pu = (oc @ u_t - c_u) + t * (dd @ u_t)
-        pv = (oc @ v_t - c_v) + t * (dd @ v_t)
+            pu = (oc @ u_t - c_u) + t * (dd @ u_t)
+            pv = (oc @ v_t - c_v) + t * (dd @ v_t)
         hit = ((t > t_min) & (np.abs(pu) <= r.half_size[:, None, :, 0])
                & (np.abs(pv) <= r.half_size[:, None, :, 1]))
         t = np.where(hit, t, np.inf)
@@ -223,11 +228,11 @@ def _cast_sectors(o: np.ndarray, d: np.ndarray, rects: RectArrays,
                 continue
             oo, dd = os_[a0:a1], ds[a0:a1]
             dn = dd @ nrm[m]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = ((c[m] - oo) @ nrm[m]) / dn
             q = oo - c[m]
-            pu = q @ u[m] + t * (dd @ u[m])
-            pv = q @ v[m] + t * (dd @ v[m])
+            with np.errstate(divide="ignore", invalid="ignore"):   # parallel rays: NaN, no hit
+                t = ((c[m] - oo) @ nrm[m]) / dn
+                pu = q @ u[m] + t * (dd @ u[m])
+                pv = q @ v[m] + t * (dd @ v[m])
             hit = (t > t_min) & (np.abs(pu) <= h[m, 0]) & (np.abs(pv) <= h[m, 1])
             closer = hit & (t < best[a0:a1])
             if closer.any():

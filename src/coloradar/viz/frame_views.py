@@ -7,14 +7,14 @@ has them (else heatmaps computed from ADC); the scene view is :func:`~.scene.plo
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from ..calib import RadarCalib
 from ..errors import MissingDataError, SettingsError
-from .radar import plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
+from .radar import HeatmapView, plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
 from .scene import _has, _run_start, plot_scene, radar_source
 
 __all__ = ["VIEWS", "frame_figure", "range_azimuth_figure", "range_doppler_figure"]
@@ -40,7 +40,8 @@ def range_doppler_figure(adc: np.ndarray, calib: RadarCalib, *, title: str | Non
                               title=title or f"{calib.name} range–Doppler", **kw)
 
 
-def range_azimuth_figure(adc: np.ndarray, calib: RadarCalib, *, mode: str = "bev",
+def range_azimuth_figure(adc: np.ndarray, calib: RadarCalib, *,
+                         mode: Literal["bev", "polar"] = "bev",
                          title: str | None = None, **kw) -> Figure:
     """Range–azimuth image of one ADC frame (maximum over elevation of its heatmap)."""
     proc = _processor(calib)
@@ -52,7 +53,7 @@ def range_azimuth_figure(adc: np.ndarray, calib: RadarCalib, *, mode: str = "bev
 
 def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
                  coords: str = "base", scene_view: str = "bev", stream: str | None = None,
-                 extent: float | None = 20.0, heatmap_slice: str = "azimuth-range",
+                 extent: float | None = 20.0, heatmap_slice: HeatmapView = "azimuth-range",
                  polar: bool = False, max_range: float | None = None) -> Figure:
     """The ``view`` picture of frame ``index`` of ``seq``.
 

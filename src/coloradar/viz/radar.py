@@ -2,11 +2,13 @@
 
 Every function takes arrays plus their axes (bin centres in metres, radians, m/s) and returns a
 :class:`matplotlib.figure.Figure`; save it with :func:`coloradar.viz.save_figure`. Images are
-drawn so that the radar's left (+y, positive azimuth, DESIGN.md §3) is on the picture's left,
+drawn so that the radar's left (+y, positive azimuth, docs/conventions.md §3) is on the picture's left,
 as seen from behind the sensor, and range grows upward.
 """
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -17,12 +19,16 @@ from ..errors import FrameIndexError, SettingsError
 from ._figure import cell_edges, new_figure, to_db
 
 __all__ = [
+    "HeatmapView",
     "plot_heatmap_slice",
     "plot_range_azimuth",
     "plot_range_doppler",
 ]
 
 RANGE_RATE_LABEL = "range rate [m/s] (+ receding)"
+
+HeatmapView = Literal["azimuth-range", "elevation-azimuth"]
+"""The two slices of a heatmap :func:`plot_heatmap_slice` draws."""
 
 
 def _uniform_extent(centres: np.ndarray) -> tuple[float, float]:
@@ -105,7 +111,8 @@ def plot_range_doppler(power: np.ndarray, range_bins: np.ndarray, velocity_bins:
 
 
 def plot_range_azimuth(power: np.ndarray, range_bins: np.ndarray, azimuth_bins: np.ndarray, *,
-                       mode: str = "bev", db: bool = True, dynamic_range: float | None = 40.0,
+                       mode: Literal["bev", "polar"] = "bev", db: bool = True,
+                       dynamic_range: float | None = 40.0,
                        max_range: float | None = None, title: str | None = None,
                        ax: Axes | None = None, size: tuple[float, float] = (8.0, 6.0)) -> Figure:
     """Range–azimuth image, as a bird's-eye view or on range/azimuth axes.
@@ -166,7 +173,7 @@ def plot_range_azimuth(power: np.ndarray, range_bins: np.ndarray, azimuth_bins: 
     return fig
 
 
-def _pick(hm: np.ndarray, axis: int, index: int | None, reduce: str) -> tuple[np.ndarray,
+def _pick(hm: np.ndarray, axis: int, index: int | None, reduce: Literal["slice", "max"]) -> tuple[np.ndarray,
                                                                                np.ndarray, int]:
     """Slice (or max-reduce) intensity and range rate along ``axis`` of ``(el, az, range)``."""
     inten, rate = hm[..., 0], hm[..., 1]
@@ -184,8 +191,9 @@ def _pick(hm: np.ndarray, axis: int, index: int | None, reduce: str) -> tuple[np
 
 
 def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
-                       view: str = "azimuth-range", index: int | None = None,
-                       reduce: str = "slice", db: bool = True, dynamic_range: float = 40.0,
+                       view: HeatmapView = "azimuth-range", index: int | None = None,
+                       reduce: Literal["slice", "max"] = "slice", db: bool = True,
+                       dynamic_range: float = 40.0,
                        show_range_rate: bool = True, max_range: float | None = None,
                        title: str | None = None, size: tuple[float, float] | None = None
                        ) -> Figure:

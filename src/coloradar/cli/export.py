@@ -1,0 +1,83 @@
+"""``coloradar export RUN OUT --format ros1|ros2``: a run as a ROS bag (optional extra ``ros``)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..dataset import open_sequence
+from ..interop.ros import DEFAULT_TOPICS, GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, ROS_FORMATS, export_bag
+from ..progress import Progress
+from ._common import new_output_file
+
+
+def _topic(text: str) -> tuple[str, str]:
+    stream, sep, topic = text.partition("=")
+    if not sep or stream not in DEFAULT_TOPICS or not topic.startswith("/"):
+        raise argparse.ArgumentTypeError(
+            f"expected STREAM=/topic with STREAM one of {', '.join(DEFAULT_TOPICS)}, got {text!r}")
+    return stream, topic
+
+
+def _setting(text: str) -> tuple[str, object]:
+    from ..dsp import ProcessingSettings
+
+    try:
+        return ProcessingSettings.parse_setting(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "export", help="write a run as a ROS 1 or ROS 2 bag",
+        description="Write a run's lidar and radar point clouds (sensor_msgs/PointCloud2: x y z "
+                    "intensity [doppler]), IMU (sensor_msgs/Imu), ground truth "
+                    "(nav_msgs/Odometry or geometry_msgs/PoseStamped), Vicon poses and the "
+                    "extrinsics (tf2_msgs/TFMessage on /tf_static) to a ROS 1 .bag file or a "
+                    "ROS 2 bag folder, every message stamped with the time in the run's files. "
+                    "Needs the optional 'rosbags' package: pip install 'coloradar[ros]'.")
+    p.add_argument("run", help="run folder or .zip")
+    p.add_argument("out", help="output: a .bag file (ros1) or a bag folder (ros2)")
+    p.add_argument("--format", choices=ROS_FORMATS, required=True, help="bag format")
+    p.add_argument("--streams", help="comma-separated subset of "
+                   f"{','.join(DEFAULT_TOPICS)} (default: all the run has)")
+    p.add_argument("--topic", type=_topic, action="append", default=[], metavar="STREAM=/TOPIC",
+                   help="rename a stream's topic, e.g. lidar/pointclouds=/os1/points "
+                        "(repeatable; defaults: " + ", ".join(f"{k}={v}" for k, v in
+                                                          DEFAULT_TOPICS.items()) + ")")
+    p.add_argument("--radar-points", choices=RADAR_POINT_SOURCES, default="auto",
+                   help="radar points from the run's own point clouds (shipped), computed from "
+                        "ADC frames or from heatmaps; auto (default): shipped, else adc, else "
+                        "heatmaps")
+    p.add_argument("--set", dest="settings", type=_setting, action="append", default=[],
+                   metavar="NAME=VALUE", help="a coloradar.dsp.ProcessingSettings field for "
+                                          "points computed from ADC (repeatable)")
+    p.add_argument("--groundtruth-msg", choices=GROUNDTRUTH_MSGS, default="odometry",
+                   help="nav_msgs/Odometry (default) or geometry_msgs/PoseStamped")
+    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing bag")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    streams = [s.strip() for s in args.streams.split(",") if s.strip()] if args.streams else None
+    new_output_file(args.out, args.overwrite)  # fail before reading anything
+    seq = open_sequence(args.run, calib=args.calib)
+    prog = Progress(0, f"{seq.name} -> {args.format}", unit="messages", enabled=not args.quiet)
+    res = export_bag(seq, args.out, args.format, streams=streams, topics=dict(args.topic),
+                     radar_points=args.radar_points, groundtruth_msg=args.groundtruth_msg,
+                     processing=dict(args.settings) or None, overwrite=args.overwrite,
+                     progress=prog)
+    prog.close()  # only on success: a failed command shows its error, not an empty bar
+    sec = max(res.seconds, 1e-9)
+    print(f"{res.path}: {args.format} bag, {res.messages} messages ({res.frames} point clouds) "
+          f"in {res.seconds:.1f} s ({res.messages / sec:.0f} messages/s, "
+          f"{res.frames / sec:.1f} point clouds/s)")
+    for topic, n in res.counts.items():
+        print(f"  {topic:<24} {n:>7}")
+    for radar, src in res.sources.items():
+        print(f"  {radar} points: {src}")
+    for key, why in res.skipped.items():
+        print(f"  skipped {key}: {why}")
+    return 0

@@ -1,0 +1,62 @@
+"""``coloradar import BAG OUT``: a ROS 1 or ROS 2 bag as a ColoRadar run (optional extra ``ros``)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import SettingsError
+from ..interop.ros import DEFAULT_TOPICS, import_bag, iter_topics, parse_topic_map
+from ..progress import Progress
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "import", help="turn a ROS 1 or ROS 2 bag into a ColoRadar run",
+        description="Read point clouds (sensor_msgs/PointCloud2), IMU (sensor_msgs/Imu), poses "
+                    "(nav_msgs/Odometry, geometry_msgs/PoseStamped, PoseWithCovarianceStamped "
+                    "or TransformStamped) and /tf_static extrinsics from a bag and write them "
+                    "as the run OUT/NAME in the dataset's layout, with OUT/calib when absent, "
+                    "so that every coloradar command and open_sequence read it. Needs the "
+                    "optional 'rosbags' package: pip install 'coloradar[ros]'.")
+    p.add_argument("bag", help="a ROS 1 .bag file or a ROS 2 bag folder")
+    p.add_argument("out", nargs="?", help="dataset root to write the run into")
+    p.add_argument("--topic", action="append", default=[], metavar="/TOPIC=STREAM",
+                   help="take TOPIC as STREAM (one of " + ", ".join(DEFAULT_TOPICS) + "); "
+                        "repeatable; without any, the topics 'coloradar export' writes")
+    p.add_argument("--name", help="run folder name (default: the bag's name)")
+    p.add_argument("--calib", help="calib folder whose radar configurations OUT/calib gets "
+                               "(default: the built-in presets); extrinsics come from /tf_static")
+    p.add_argument("--base-frame", default="base", help="tf frame of the rig's base (default base)")
+    p.add_argument("--time", dest="time_source", choices=("header", "bag"), default="header",
+                   help="message header stamps (default) or bag record times")
+    p.add_argument("--relative-poses", action="store_true",
+                   help="make ground-truth poses relative to the first one, as the dataset's are")
+    p.add_argument("--list", action="store_true", help="only list the bag's topics")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace a run of the same name written by an earlier import")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.list:
+        for topic, mtype, n in iter_topics(args.bag):
+            print(f"{topic:<32} {mtype:<40} {n:>7}")
+        return 0
+    if args.out is None:
+        raise SettingsError("give the dataset root OUT to import into (or --list)")
+    topics = parse_topic_map(args.topic) if args.topic else None
+    prog = Progress(0, "import", unit="messages", enabled=not args.quiet)
+    res = import_bag(args.bag, args.out, name=args.name, topics=topics, calib=args.calib,
+                     base_frame=args.base_frame, time_source=args.time_source,
+                     relative_poses=args.relative_poses, overwrite=args.overwrite,
+                     progress=prog)
+    prog.close()  # only on success: a failed command shows its error, not an empty bar
+    print(f"{res.run_path}: run imported from {args.bag} in {res.seconds:.1f} s")
+    for stream, n in res.counts.items():
+        print(f"  {stream:<24} {n:>7}  from {res.topics[stream]}")
+    print(f"  calib: {res.calib_path} ({'written' if res.calib_written else 'kept'}; extrinsics "
+          f"from /tf_static: {', '.join(res.extrinsics) or 'none'})")
+    for topic, mtype in res.ignored.items():
+        print(f"  ignored {topic} ({mtype})")
+    return 0

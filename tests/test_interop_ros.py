@@ -1,0 +1,285 @@
+"""ROS bag export and import: round trips, an independent read with rosbags, foreign bags."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from coloradar import FormatError, MissingDataError, OutputExistsError, open_sequence
+from coloradar.cli.main import main
+from coloradar.interop import decode_cloud, export_bag, import_bag, ns_to_times, times_to_ns
+from coloradar.interop.pointcloud2 import CloudLayout
+from coloradar.sim.run import simulate_run
+
+rosbags = pytest.importorskip("rosbags", reason="the optional 'ros' extra (rosbags) is not installed")
+from rosbags.highlevel import AnyReader  # noqa: E402
+from rosbags.typesys import Stores, get_typestore  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rosrun")
+    res = simulate_run(root, duration=1.0, seed=2, heatmaps=False, vicon=True)
+    return open_sequence(res.run_path)
+
+
+# -- time ------------------------------------------------------------------------------------
+def test_times_to_ns_is_exact_against_rational_arithmetic():
+    rng = np.random.default_rng(0)
+    t = 1.6e9 + rng.uniform(0, 1e6, 2000)
+    t = np.array([float(f"{v:.9f}") for v in t])          # as the text files hold them
+    t[:3] = [1_600_000_000.0, 1_600_000_000.999999999, 12.5]
+    sec, nsec = times_to_ns(t)
+    for v, s, n in zip(t[:200], sec[:200], nsec[:200], strict=True):
+        exact = round(Fraction(v) * 10**9)                  # nearest ns of the float64, exactly
+        assert s * 10**9 + n == exact
+    assert np.all((nsec >= 0) & (nsec < 10**9))
+    assert np.array_equal(ns_to_times(sec, nsec), t)        # back to the very same float64
+
+
+# -- PointCloud2 layouts -----------------------------------------------------------------------
+def test_decode_cloud_reads_a_foreign_padded_big_endian_organised_layout():
+    rng = np.random.default_rng(1)
+    h, w = 2, 7
+    dt = np.dtype([("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("pad", "V3"),
+                   ("range_rate", ">f4"), ("power", ">u2"), ("pad2", "V5")])
+    rec = np.zeros((h, w), dt)
+    for f in ("x", "y", "z", "range_rate"):
+        rec[f] = rng.standard_normal((h, w))
+    rec["power"] = rng.integers(0, 60000, (h, w))
+    row_pad = 11
+    buf = np.zeros(h * (w * dt.itemsize + row_pad), np.uint8)
+    for r in range(h):
+        start = r * (w * dt.itemsize + row_pad)
+        buf[start:start + w * dt.itemsize] = rec[r].view(np.uint8)
+    layout = CloudLayout(("x", "y", "z", "range_rate", "power"),
+                         tuple(dt.fields[f][1] for f in ("x", "y", "z", "range_rate", "power")),
+                         (8, 8, 8, 7, 4), (1,) * 5, dt.itemsize, w * dt.itemsize + row_pad, h, w,
+                         True)
+    got = decode_cloud(layout, buf, ("x", "y", "z", "intensity", "doppler"),
+                       aliases={"doppler": ("range_rate",), "intensity": ("power",)})
+    flat = rec.reshape(-1)
+    want = np.stack([flat["x"], flat["y"], flat["z"], flat["power"], flat["range_rate"]], axis=1)
+    assert np.array_equal(got, want.astype(np.float32))
+    with pytest.raises(FormatError, match="no field doppler"):
+        decode_cloud(layout, buf, ("x", "doppler"))
+    with pytest.raises(FormatError, match="data bytes"):
+        decode_cloud(layout, buf[:50], ("x",))
+
+
+# -- export, read back by rosbags alone ----------------------------------------------------------
+def _cloud(msg) -> np.ndarray:
+    names = [f.name for f in msg.fields]
+    assert all(f.datatype == 7 and f.count == 1 for f in msg.fields)
+    assert [f.offset for f in msg.fields] == [4 * i for i in range(len(names))]
+    assert msg.point_step == 4 * len(names) and msg.height == 1 and not msg.is_bigendian
+    return np.frombuffer(bytes(msg.data), "<f4").reshape(msg.width, len(names))
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec / 1e9
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "ros2"])
+def test_exported_bag_read_by_rosbags_alone(run, tmp_path, fmt):
+    out = tmp_path / ("run.bag" if fmt == "ros1" else "run_ros2")
+    res = export_bag(run, out, fmt, radar_points="shipped",
+                     streams=["lidar/pointclouds", "single_chip/pointclouds", "imu", "groundtruth",
+                              "vicon", "tf_static"])
+    if fmt == "ros2":
+        assert (out / "metadata.yaml").is_file()
+    got: dict[str, list] = {}
+    with AnyReader([out], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        (tf_conn,) = [c for c in reader.connections if c.topic == "/tf_static"]
+        if fmt == "ros1":
+            assert tf_conn.ext.latching == 1
+        else:  # latched in ROS 2 terms: transient local
+            from rosbags.interfaces import QosDurability
+
+            assert tf_conn.ext.offered_qos_profiles[0].durability == QosDurability.TRANSIENT_LOCAL
+        last = -1
+        for conn, t_ns, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic != "/tf_static":
+                st = msg.header.stamp
+                assert t_ns == st.sec * 10**9 + st.nanosec      # bag time = header stamp
+            assert t_ns >= last                                  # written in time order
+            last = t_ns
+            got.setdefault(conn.topic, []).append(msg)
+    assert types == {"/lidar/points": "sensor_msgs/msg/PointCloud2",
+                     "/single_chip/points": "sensor_msgs/msg/PointCloud2",
+                     "/imu/data": "sensor_msgs/msg/Imu", "/groundtruth/odom": "nav_msgs/msg/Odometry",
+                     "/vicon/pose": "geometry_msgs/msg/PoseStamped",
+                     "/tf_static": "tf2_msgs/msg/TFMessage"}
+    assert res.counts == {k: len(v) for k, v in got.items()}
+
+    lid = run.lidar.pointclouds
+    assert np.array_equal([_stamp(m) for m in got["/lidar/points"]], lid.timestamps)
+    for k in (0, len(lid) - 1):
+        assert np.array_equal(_cloud(got["/lidar/points"][k]), lid[k])
+        assert [f.name for f in got["/lidar/points"][k].fields] == ["x", "y", "z", "intensity"]
+    sc = run.single_chip.pointclouds
+    assert np.array_equal([_stamp(m) for m in got["/single_chip/points"]], sc.timestamps)
+    for k, m in enumerate(got["/single_chip/points"]):
+        assert [f.name for f in m.fields] == ["x", "y", "z", "intensity", "doppler"]
+        assert m.header.frame_id == "single_chip"
+        assert np.array_equal(_cloud(m), sc[k])
+    imu = np.array([[m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z,
+                     m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
+                    for m in got["/imu/data"]])
+    assert np.array_equal(imu, run.imu.data)
+    assert all(m.orientation_covariance[0] == -1 for m in got["/imu/data"])
+    gt = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z,
+                    m.pose.pose.orientation.x, m.pose.pose.orientation.y, m.pose.pose.orientation.z,
+                    m.pose.pose.orientation.w] for m in got["/groundtruth/odom"]])
+    assert np.array_equal(gt, run.groundtruth.poses)
+    assert {(m.header.frame_id, m.child_frame_id) for m in got["/groundtruth/odom"]} == {("world", "base")}
+    assert np.array_equal([_stamp(m) for m in got["/vicon/pose"]], run.vicon.timestamps)
+    (tf,) = got["/tf_static"]
+    tfs = {t.child_frame_id: t for t in tf.transforms}
+    assert set(tfs) == set(run.calib.transforms)
+    for name, ext in run.calib.transforms.items():
+        tr = tfs[name].transform
+        assert tfs[name].header.frame_id == "base"
+        assert np.array_equal([tr.translation.x, tr.translation.y, tr.translation.z], ext.translation)
+        assert np.array_equal([tr.rotation.x, tr.rotation.y, tr.rotation.z, tr.rotation.w],
+                              ext.quaternion)
+
+
+# -- round trip ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("fmt", ["ros1", "ros2"])
+def test_export_import_round_trip_is_identical(run, tmp_path, fmt):
+    out = tmp_path / ("run.bag" if fmt == "ros1" else "run_ros2")
+    res = export_bag(run, out, fmt)
+    assert res.sources == {"cascade": "adc", "single_chip": "shipped"}
+    imp = import_bag(out, tmp_path / "ds", name="back")
+    assert imp.calib_written and imp.extrinsics == sorted(run.calib.transforms)
+    back = open_sequence(imp.run_path)                    # finds ds/calib beside the run
+    for a, b in ((run.lidar.pointclouds, back.lidar.pointclouds),
+                 (run.single_chip.pointclouds, back.single_chip.pointclouds)):
+        assert np.array_equal(a.timestamps, b.timestamps)
+        assert len(a) == len(b) and all(np.array_equal(a[k], b[k]) for k in range(len(a)))
+    # cascade points were computed from ADC by coloradar.dsp: same frames, same times
+    from coloradar.dsp import RadarProcessor
+
+    proc = RadarProcessor(run.calib.cascade)
+    assert np.array_equal(back.cascade.pointclouds.timestamps, run.cascade.adc.timestamps)
+    assert np.array_equal(back.cascade.pointclouds[1], proc.pointcloud(run.cascade.adc[1]))
+    for name in ("imu", "groundtruth", "vicon"):
+        a, b = getattr(run, name), getattr(back, name)
+        assert np.array_equal(a.timestamps, b.timestamps)
+        assert np.array_equal(a.data if name == "imu" else a.poses, b.data if name == "imu" else b.poses)
+    for name, ext in run.calib.transforms.items():
+        assert np.allclose(back.calib.transforms[name].translation, ext.translation, atol=1e-12)
+        assert np.allclose(back.calib.transforms[name].matrix(), ext.matrix(), atol=1e-12)
+
+
+# -- foreign bag: own topic names, a tf chain -----------------------------------------------------
+def test_import_foreign_bag_with_topic_map_and_tf_chain(tmp_path):
+    from rosbags.rosbag2 import Writer
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    path = tmp_path / "rig"
+    rng = np.random.default_rng(3)
+    pts = [rng.standard_normal((n, 3)).astype(np.float32) for n in (5, 9)]
+    t0 = 1_700_000_000
+
+    def header(k, frame):
+        stamp = T["builtin_interfaces/msg/Time"](sec=t0 + k, nanosec=250_000_000)
+        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
+
+    def tfm(parent, child, t, q):
+        return T["geometry_msgs/msg/TransformStamped"](
+            header=header(0, parent), child_frame_id=child,
+            transform=T["geometry_msgs/msg/Transform"](
+                translation=T["geometry_msgs/msg/Vector3"](x=t[0], y=t[1], z=t[2]),
+                rotation=T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])))
+
+    q1 = Rotation.from_euler("z", 90, degrees=True).as_quat()
+    q2 = Rotation.from_euler("x", 30, degrees=True).as_quat()
+    with Writer(path, version=8) as w:
+        c_pts = w.add_connection("/radar/detections", "sensor_msgs/msg/PointCloud2", typestore=ts)
+        c_tf = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
+        msg = T["tf2_msgs/msg/TFMessage"](transforms=[tfm("base_link", "mount", (1.0, 0.0, 0.5), q1),
+                                                      tfm("mount", "radar_link", (0.0, 0.2, 0.0), q2)])
+        w.write(c_tf, t0 * 10**9, ts.serialize_cdr(msg, "tf2_msgs/msg/TFMessage"))
+        F = T["sensor_msgs/msg/PointField"]
+        for k, p in enumerate(pts):  # x y z and a velocity field under another name
+            data = np.concatenate([p, p[:, :1] * 0.5], axis=1).astype("<f4")
+            cloud = T["sensor_msgs/msg/PointCloud2"](
+                header=header(k, "radar_link"), height=1, width=len(p),
+                fields=[F(name=n, offset=4 * i, datatype=7, count=1)
+                        for i, n in enumerate(("x", "y", "z", "velocity"))],
+                is_bigendian=False, point_step=16, row_step=16 * len(p),
+                data=data.reshape(-1).view(np.uint8), is_dense=True)
+            w.write(c_pts, (t0 + k) * 10**9, ts.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
+
+    imp = import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds",
+                                                    "/tf_static": "tf_static"},
+                     base_frame="base_link")
+    seq = open_sequence(imp.run_path)
+    got = seq.single_chip.pointclouds
+    assert np.array_equal(got.timestamps, t0 + np.arange(2) + 0.25)
+    for k, p in enumerate(pts):
+        assert np.array_equal(got[k][:, :3], p)
+        assert np.all(got[k][:, 3] == 0)                    # no intensity field: zeros
+        assert np.array_equal(got[k][:, 4], (p[:, 0] * 0.5).astype(np.float32))
+    # base_T_radar = base_T_mount @ mount_T_radar, composed here with plain matrices
+    m1, m2 = np.eye(4), np.eye(4)
+    m1[:3, :3], m1[:3, 3] = Rotation.from_quat(q1).as_matrix(), (1.0, 0.0, 0.5)
+    m2[:3, :3], m2[:3, 3] = Rotation.from_quat(q2).as_matrix(), (0.0, 0.2, 0.0)
+    assert np.allclose(seq.calib.transforms["single_chip"].matrix(), m1 @ m2, atol=1e-12)
+    assert imp.extrinsics == ["single_chip"]
+
+    with pytest.raises(FormatError, match="carries sensor_msgs/msg/PointCloud2"):
+        import_bag(path, tmp_path / "ds2", topics={"/radar/detections": "imu"})
+    with pytest.raises(MissingDataError, match="no topic /nope"):
+        import_bag(path, tmp_path / "ds2", topics={"/nope": "imu"})
+    with pytest.raises(OutputExistsError):
+        import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds"})
+    imp2 = import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds"},
+                      overwrite=True)
+    assert not imp2.calib_written                              # the existing calib is kept
+
+
+def test_outputs_are_never_overwritten_unless_asked(run, tmp_path):
+    bag = tmp_path / "a.bag"
+    export_bag(run, bag, "ros1", streams=["imu"])
+    size = bag.stat().st_size
+    with pytest.raises(OutputExistsError):
+        export_bag(run, bag, "ros1", streams=["imu"])
+    export_bag(run, bag, "ros1", streams=["imu", "groundtruth"], overwrite=True)
+    assert bag.stat().st_size > size
+    other = tmp_path / "notes.txt"
+    other.write_text("mine")
+    with pytest.raises(OutputExistsError, match="not a ros1 bag"):
+        export_bag(run, other, "ros1", overwrite=True)
+    assert other.read_text() == "mine"
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "x.txt").write_text("mine")
+    with pytest.raises(OutputExistsError):
+        import_bag(bag, tmp_path, name="mine", overwrite=True)   # not written by an import
+    with pytest.raises(FormatError, match=r"expected a ROS 1 \.bag"):
+        import_bag(other, tmp_path / "ds")
+    assert not list(tmp_path.glob(".*partial*"))
+
+
+def test_cli_export_and_import(run, tmp_path, capsys):
+    bag = tmp_path / "cli.bag"
+    assert main(["export", str(run.location), str(bag), "--format", "ros1", "--quiet",
+                 "--streams", "imu,groundtruth", "--topic", "imu=/rig/imu"]) == 0
+    out = capsys.readouterr().out
+    assert "/rig/imu" in out and "ros1 bag" in out
+    assert main(["export", str(run.location), str(bag), "--format", "ros1", "--quiet"]) == 1
+    assert main(["import", str(bag), str(tmp_path / "ds"), "--quiet",
+                 "--topic", "/rig/imu=imu", "--topic", "/groundtruth/odom=groundtruth"]) == 0
+    back = open_sequence(Path(tmp_path / "ds" / "cli"))
+    assert np.array_equal(back.imu.data, run.imu.data)
+    assert main(["import", str(bag), "--list"]) == 0
+    assert "/rig/imu" in capsys.readouterr().out
