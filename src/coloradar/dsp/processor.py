@@ -151,6 +151,7 @@ class ProcessingSettings:
     overlap: OverlapMode = "first"
     azimuth_sign: int = 1
     elevation_sign: int = 1
+    beam_doppler: bool = True
     cfar_kind: CFARKind = "ca"
     cfar_guard: tuple[int, int] = (1, 2)
     cfar_train: tuple[int, int] = (2, 8)
@@ -595,7 +596,10 @@ class RadarProcessor:
         elif spec is None:
             vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
-        uy, uz, peak = self._peak_directions(spec)
+        uy, uz, peak, ie, ia = self._peak_directions(spec)
+        if s.beam_doppler and d.size:
+            d_ref = self._beam_doppler(rd, d, r, alias, ie, ia)
+            k_signed = d_ref - nd // 2
         rng = r_ref * self.range_bin_width
         unit = sines_to_unit(uy, uz)
         xyz = rng[:, None] * unit
@@ -650,8 +654,37 @@ class RadarProcessor:
         best = np.argmax(score, axis=1) if k else np.zeros(0, dtype=np.int64)
         return hyps[best], spectra
 
-    def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
+    def _beam_doppler(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
+                      alias: np.ndarray | None, ie: np.ndarray, ia: np.ndarray) -> np.ndarray:
+        """Sub-bin Doppler of each detection from the beam steered at its direction.
+
+        BEAMDOC
+        """
+        ntx = rd.shape[0]
+        nd = rd.shape[2]
+        k = d.size
+        cols = []
+        for j in (-1, 0, 1):
+            dn = (d + j) % nd
+            # rd holds the compensation of the wrapped bin dn; a neighbour across the edge
+            # needs that of d + j, one full Doppler period (an alias) away.
+            v = rd[:, :, dn, r]
+            if self._tdm is not None:
+                v = v * tdm_phase(ntx, (d + j - dn).astype(np.float64), nd)[:, None, :]
+            if alias is not None:
+                v = v * alias_phase(ntx, alias)[:, None, :]
+            cols.append(v)
+        vecs = np.concatenate(cols, axis=2)                              # (tx, rx, 3K)
+        vectors = combine_channels(vecs, self.calib.antenna.virtual, self.settings.overlap).T
+        spec = bartlett_spectrum(self.detection_grid, vectors, workers=self.settings.workers)
+        idx = np.arange(k)
+        p3 = np.stack([spec[j * k + idx, ie, ia] for j in range(3)], axis=1)
+        return refine_peak(p3, d, nd, wrap=True)
+
+    def _peak_directions(self, spec: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Sub-bin peak direction sines, peak value and peak grid cell ``(ie, ia)`` of
+        ``(K, el, az)`` spectra."""
         g = self.detection_grid
         k = spec.shape[0]
         masked = np.where(self._visible[None], spec, 0.0)
@@ -665,7 +698,7 @@ class RadarProcessor:
                                    spec[kk, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
         uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
         uy = 2.0 * (fa - na // 2) / (na * g.rho)
-        return uy, uz, spec[kk, ie, ia].astype(np.float64)
+        return uy, uz, spec[kk, ie, ia].astype(np.float64), ie, ia
 
     def pointcloud(self, adc: np.ndarray) -> np.ndarray:
         """Point cloud of one frame, float32 ``(N, 5)``: ``x y z intensity range_rate``."""
