@@ -19,7 +19,8 @@ and coupling when the calibration has them), prints the time per frame of
   (calibration, windows, TDM, gathers, power, Doppler maximum, output layout) is counted as
   the chain's own cost;
 * the detection chain's additions of issue 10 one at a time on top of the plain chain
-  (noise whitening, CFAR excision, Doppler alias search, sidelobe guard) and the
+  (noise whitening, CFAR excision, Doppler alias search, sidelobe guard, beam-steered
+  Doppler refinement) and the
   disambiguated heatmap (``heatmap_unwrap``) beside the plain heatmap. ``--only detection``
   runs just these, ``--only heatmap`` just the sections above.
 
@@ -193,11 +194,13 @@ def floor_jobs(calib, proc: RadarProcessor) -> dict:
 # ------------------------------------------------------------------ detection additions
 DETECTION_STEPS = (
     ("plain chain", dict(noise_weighting="off", cfar_excision=False, doppler_unwrap=0.0,
-                         sidelobe_guard=False)),
-    ("+ noise whitening", dict(cfar_excision=False, doppler_unwrap=0.0, sidelobe_guard=False)),
-    ("+ CFAR excision", dict(doppler_unwrap=0.0, sidelobe_guard=False)),
-    ("+ Doppler alias search", dict(sidelobe_guard=False)),
-    ("+ sidelobe guard (default)", {}),
+                         sidelobe_guard=False, beam_doppler=False)),
+    ("+ noise whitening", dict(cfar_excision=False, doppler_unwrap=0.0, sidelobe_guard=False,
+                               beam_doppler=False)),
+    ("+ CFAR excision", dict(doppler_unwrap=0.0, sidelobe_guard=False, beam_doppler=False)),
+    ("+ Doppler alias search", dict(sidelobe_guard=False, beam_doppler=False)),
+    ("+ sidelobe guard", dict(beam_doppler=False)),
+    ("+ beam Doppler (default)", {}),
 )
 
 

@@ -596,9 +596,9 @@ class RadarProcessor:
         elif spec is None:
             vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
-        uy, uz, peak, ie, ia = self._peak_directions(spec)
+        uy, uz, peak = self._peak_directions(spec)
         if s.beam_doppler and d.size:
-            d_ref = self._beam_doppler(rd, d, r, alias, ie, ia)
+            d_ref = self._beam_doppler(rd, d, r, alias, uy, uz)
             k_signed = d_ref - nd // 2
         rng = r_ref * self.range_bin_width
         unit = sines_to_unit(uy, uz)
@@ -655,36 +655,39 @@ class RadarProcessor:
         return hyps[best], spectra
 
     def _beam_doppler(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
-                      alias: np.ndarray | None, ie: np.ndarray, ia: np.ndarray) -> np.ndarray:
+                      alias: np.ndarray | None, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
         """Sub-bin Doppler of each detection from the beam steered at its direction.
 
-        BEAMDOC
+        The power map sums all directions, so a cell of an extended surface (floor, wall) mixes
+        scatterers of many range rates, and its Doppler peak is pulled off the range rate of
+        the direction the angle spectrum found (docs/dsp.md, "Beam-steered Doppler"). The
+        beam at that direction keeps only its neighbourhood. Returns float64 ``(K,)``
+        refined Doppler bins, as the power-map refinement.
         """
         ntx = rd.shape[0]
         nd = rd.shape[2]
-        k = d.size
+        g = self.detection_grid
         cols = []
         for j in (-1, 0, 1):
             dn = (d + j) % nd
-            # rd holds the compensation of the wrapped bin dn; a neighbour across the edge
-            # needs that of d + j, one full Doppler period (an alias) away.
             v = rd[:, :, dn, r]
             if self._tdm is not None:
+                # rd holds the compensation of the wrapped bin dn; a neighbour across the
+                # edge needs that of d + j, one Doppler period (one alias) away.
                 v = v * tdm_phase(ntx, (d + j - dn).astype(np.float64), nd)[:, None, :]
             if alias is not None:
                 v = v * alias_phase(ntx, alias)[:, None, :]
-            cols.append(v)
-        vecs = np.concatenate(cols, axis=2)                              # (tx, rx, 3K)
-        vectors = combine_channels(vecs, self.calib.antenna.virtual, self.settings.overlap).T
-        spec = bartlett_spectrum(self.detection_grid, vectors, workers=self.settings.workers)
-        idx = np.arange(k)
-        p3 = np.stack([spec[j * k + idx, ie, ia] for j in range(3)], axis=1)
+            cols.append(combine_channels(v, self.calib.antenna.virtual, self.settings.overlap))
+        # The Bartlett beam at the refined sines: the angle grid's FFT evaluated off-grid,
+        # Σ_m x_m exp(jπρ(s_az·p_az,m·u_y + s_el·p_el,m·u_z)) over unique elements m.
+        phase = np.pi * g.rho * (g.azimuth_sign * g.az_pos[:, None] * uy[None, :]
+                                 + g.elevation_sign * g.el_pos[:, None] * uz[None, :])
+        steer = np.exp(1j * phase).astype(np.complex64)                    # (M, K)
+        p3 = np.stack([np.abs(np.sum(c * steer, axis=0)) ** 2 for c in cols], axis=1)
         return refine_peak(p3, d, nd, wrap=True)
 
-    def _peak_directions(self, spec: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Sub-bin peak direction sines, peak value and peak grid cell ``(ie, ia)`` of
-        ``(K, el, az)`` spectra."""
+    def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
         g = self.detection_grid
         k = spec.shape[0]
         masked = np.where(self._visible[None], spec, 0.0)
@@ -698,7 +701,7 @@ class RadarProcessor:
                                    spec[kk, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
         uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
         uy = 2.0 * (fa - na // 2) / (na * g.rho)
-        return uy, uz, spec[kk, ie, ia].astype(np.float64), ie, ia
+        return uy, uz, spec[kk, ie, ia].astype(np.float64)
 
     def pointcloud(self, adc: np.ndarray) -> np.ndarray:
         """Point cloud of one frame, float32 ``(N, 5)``: ``x y z intensity range_rate``."""
