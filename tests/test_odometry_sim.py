@@ -213,10 +213,14 @@ def test_ego_velocity_beyond_vmax_uses_unwrapped_range_rates(fast_cascade_run):
         return track.velocity - v_true
 
     e = errors()
-    # Horizontal components (the motion) within 0.05 m/s; v_z is observed only through the
-    # cascade's coarse elevation (errors grow with speed, ~2 % of it).
-    assert np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1))) <= 0.05, e
-    assert np.sqrt(np.mean(e[:, 2] ** 2)) <= 0.1, e
+    # The done-when figure: 3D RMSE within 0.05 m/s at up to 3.3 m/s (1.9 v_max), v_z
+    # included (observed only through the cascade's coarse elevation).
+    assert np.sqrt(np.mean(np.sum(e**2, axis=1))) <= 0.05, e
+    assert np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1))) <= 0.03, e
+    # Doppler refined on the channel-summed power instead of the detection's beam: the
+    # range rates of extended surfaces are pulled off their direction (docs/dsp.md).
+    e_power = errors({"beam_doppler": False})
+    assert np.sqrt(np.mean(np.sum(e_power**2, axis=1))) > np.sqrt(np.mean(np.sum(e**2, axis=1)))
     # A ground rig estimated planar (v_z = 0): 3D RMSE within 0.05 m/s at up to 3.3 m/s.
     e = errors(planar=True)
     assert np.sqrt(np.mean(np.sum(e**2, axis=1))) <= 0.05, e

@@ -116,6 +116,11 @@ class ProcessingSettings:
         Doppler and ``Δr`` range bins from a stronger one of power ``P`` is dropped when its
         power above the CFAR noise is below ``P·E_d(Δd)·E_r(Δr)`` times the margin, ``E`` the
         windows' worst-case sidelobe envelopes.
+    beam_doppler
+        Refine each detection's Doppler on the beam steered at its refined direction (three
+        dot products per detection) instead of on the channel-summed power: on extended
+        surfaces the summed power mixes the range rates of all directions of a cell, and the
+        range rate would not belong to the direction reported (docs/dsp.md).
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping
