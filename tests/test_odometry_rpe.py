@@ -97,12 +97,15 @@ BRUTE = {"evo": _brute_evo_consecutive, "evo_all_pairs": _brute_evo_all_pairs,
 
 @pytest.mark.parametrize("pairing", RPE_PAIRINGS)
 @pytest.mark.parametrize("d", [0.5, 1.0, 2.5])
-def test_rpe_pairs_and_errors_match_a_brute_force_of_the_rule(pairing, d):
+@pytest.mark.parametrize("pairs_from", [None, "reference", "estimate"])
+def test_rpe_pairs_and_errors_match_a_brute_force_of_the_rule(pairing, d, pairs_from):
     ref = _wander()
     est = _noisy(ref)
-    expected = BRUTE[pairing](ref.translations, d)
+    # Whose path picks the pairs: evo's default is the estimate, every_pose's the reference.
+    by = pairs_from or ("reference" if pairing == "every_pose" else "estimate")
+    expected = BRUTE[pairing]((ref if by == "reference" else est).translations, d)
     assert len(expected) > 5
-    (res,) = relative_pose_error(est, ref, [d], pairing=pairing)
+    (res,) = relative_pose_error(est, ref, [d], pairing=pairing, pairs_from=pairs_from)
     assert res.pairing == pairing
     t = ref.timestamps
     got = list(zip(np.searchsorted(t, res.start_times), np.searchsorted(t, res.end_times),
