@@ -140,3 +140,15 @@ def test_rpe_pairing_is_checked():
         rpe_pairs(np.arange(5.0), 1.0, "kitti")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="positive"):
         rpe_pairs(np.arange(5.0), 0.0)
+
+
+def test_evaluation_records_and_uses_the_pairing():
+    from coloradar.odometry import evaluate_trajectory
+    from coloradar.odometry.evaluation import evaluation_dict
+
+    ref = _wander()
+    est = _noisy(ref)
+    ev = evaluate_trajectory(est, ref, distances=(1.0,), rpe_pairing="evo")
+    expected = _brute_evo_consecutive(est.translations, 1.0)
+    assert ev.rpe[0].pairs == len(expected) and ev.rpe[0].pairing == "evo"
+    assert evaluation_dict(ev)["info"]["rpe_pairing"] == "evo"
