@@ -10,7 +10,11 @@ and coupling when the calibration has them), prints the time per frame of
   angle FFT of every range–Doppler cell) and the FFTs coloradar's chain actually calls
   (azimuth FFT of the occupied elevation rows, then the elevation FFT);
 * a straightforward NumPy version of the same heatmap (whole-cube operations, ``np.fft``,
-  ``fft2`` of every cell, ``argmax`` over Doppler), checked to give the same heatmap.
+  ``fft2`` of every cell, ``argmax`` over Doppler), checked to give the same heatmap;
+* the detection chain's additions of issue 10 one at a time on top of the plain chain
+  (noise whitening, CFAR excision, Doppler alias search, sidelobe guard) and the
+  disambiguated heatmap (``heatmap_unwrap``) beside the plain heatmap. ``--only detection``
+  runs just these.
 
 The jobs take turns for ``--repeat`` rounds and each keeps its best round (the machine may be
 shared); times are ms per frame, wall clock (or process CPU time with ``--cpu-time``).
@@ -163,11 +167,40 @@ def fft_jobs(calib, proc: RadarProcessor) -> dict:
     }
 
 
+# ------------------------------------------------------------------ detection additions
+DETECTION_STEPS = (
+    ("plain chain", dict(noise_weighting="off", cfar_excision=False, doppler_unwrap=0.0,
+                         sidelobe_guard=False)),
+    ("+ noise whitening", dict(cfar_excision=False, doppler_unwrap=0.0, sidelobe_guard=False)),
+    ("+ CFAR excision", dict(doppler_unwrap=0.0, sidelobe_guard=False)),
+    ("+ Doppler alias search", dict(sidelobe_guard=False)),
+    ("+ sidelobe guard (default)", {}),
+)
+
+
+def detection_costs(calib, fr: list[np.ndarray], repeat: int) -> None:
+    """Point cloud time with each detection addition switched on in turn, and the
+    disambiguated heatmap beside the plain one (same frames, interleaved rounds)."""
+    jobs = {name: (RadarProcessor(calib, **kw).pointcloud, fr) for name, kw in DETECTION_STEPS}
+    jobs["heatmap"] = (RadarProcessor(calib).heatmap, fr)
+    jobs["heatmap, heatmap_unwrap"] = (RadarProcessor(calib, heatmap_unwrap=True).heatmap, fr)
+    t = interleaved(jobs, repeat)
+    base = t[DETECTION_STEPS[0][0]]
+    print("  -- ADC -> point cloud, detection additions (ms/frame, x plain chain)")
+    for name, _ in DETECTION_STEPS:
+        print(f"  {name:<28s}{t[name]:8.2f}  {t[name] / base:5.2f}x")
+    print(f"  {'heatmap':<28s}{t['heatmap']:8.2f}")
+    print(f"  {'heatmap_unwrap=True':<28s}{t['heatmap, heatmap_unwrap']:8.2f}  "
+          f"{t['heatmap, heatmap_unwrap'] / t['heatmap']:5.2f}x")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=8)
     ap.add_argument("--repeat", type=int, default=7, help="rounds (best one kept)")
     ap.add_argument("--calib", type=Path, default=REAL_CALIB)
+    ap.add_argument("--only", choices=("all", "heatmap", "detection"), default="all",
+                    help="run only the heatmap section or the detection-additions section")
     ap.add_argument("--cpu-time", action="store_true",
                     help="measure process CPU time instead of wall time (everything here runs "
                          "on one thread, so on a busy shared machine this is the fairer clock)")
@@ -181,6 +214,10 @@ def main() -> None:
         calib, what = calibration(name, args.calib)
         proc = RadarProcessor(calib)
         fr = frames(calib, args.frames)
+        if args.only == "detection":
+            print(f"\n== {name} ({what})")
+            detection_costs(calib, fr, args.repeat)
+            continue
         ref = numpy_heatmap(calib, fr[0])
         got = proc.heatmap(fr[0])
         err = np.max(np.abs(got[..., 0] - ref[..., 0])) / ref[..., 0].max()
@@ -204,6 +241,8 @@ def main() -> None:
         print(f"  heatmap / textbook bare FFTs   {hm / textbook:6.2f}x")
         print(f"  heatmap / own bare FFTs        {hm / ours:6.2f}x")
         print(f"  numpy heatmap / heatmap        {t['numpy heatmap'] / hm:6.1f}x")
+        if args.only == "all":
+            detection_costs(calib, fr, args.repeat)
 
 
 if __name__ == "__main__":

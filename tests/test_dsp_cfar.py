@@ -115,3 +115,43 @@ def test_bad_windows_are_rejected():
         cfar(np.ones(50), "xx", 1, 8, 1e-3)
     with pytest.raises(ValueError, match="pfa"):
         cfar_scale("ca", 8, 1.5)
+
+
+def test_effective_train_cells_match_the_variance_of_a_windowed_noise_mean():
+    """Monte Carlo: Hann-windowed FFT of white noise; the mean of the training cells' powers
+    has variance 1/N_eff (unit-mean exponentials), N_eff from the formula."""
+    from coloradar.dsp.cfar import effective_train_cells, power_correlation
+    from coloradar.dsp.windows import window
+
+    g = np.random.default_rng(0)
+    n = 64
+    w = window("hann", n)
+    x = g.standard_normal((20000, n)) + 1j * g.standard_normal((20000, n))
+    p = np.abs(np.fft.fft(x * w, axis=1)) ** 2
+    p /= p.mean()
+    guard, train = (2,), (6,)
+    offs = np.r_[-8:-2, 3:9] + n // 2
+    var = p[:, offs].mean(axis=1).var()
+    n_eff, _ = effective_train_cells(guard, train, (power_correlation(w, n, 20),), wrap=(n,))
+    assert 1.0 / var == pytest.approx(n_eff, rel=0.05)
+    assert n_eff < 12 * 0.6                      # correlated: far fewer than 12 cells
+
+
+def test_sidelobe_envelope_bounds_every_tone_offset():
+    from coloradar.dsp.detect import sidelobe_envelope
+    from coloradar.dsp.windows import window
+
+    for name, n, nfft in (("hann", 16, 16), ("none", 32, 64), ("blackman", 128, 128)):
+        w = window(name, n)
+        env = sidelobe_envelope(w, nfft, 8)
+        k = np.arange(n)
+        worst = np.zeros(8)
+        for frac in np.linspace(-0.5, 0.5, 41):            # tone between bins
+            spec = np.abs(np.fft.fft(w * np.exp(2j * np.pi * (10 + frac) * k / nfft), nfft)) ** 2
+            peak = int(np.argmax(spec))
+            for d in range(8):
+                worst[d] = max(worst[d], spec[(peak + d) % nfft] / spec[peak],
+                               spec[(peak - d) % nfft] / spec[peak])
+        # (E is evaluated on a 1/32-bin grid of tone offsets: within 1 % of the supremum)
+        assert np.all(worst <= env * 1.01 + 1e-12), (name, worst, env)
+        assert np.all(worst[2:] >= env[2:] * 0.9), (name, worst, env)

@@ -52,3 +52,47 @@ def test_without_compensation_fast_targets_move_in_angle():
         e, _, _ = np.unravel_index(np.argmax(hm[..., 0]), hm.shape[:3])
         err = abs(cfg.elevation_bins[e] - el)
         assert (err < np.deg2rad(6.0)) == ok, (comp, np.rad2deg(cfg.elevation_bins[e]))
+
+
+def test_overlap_pairs_match_a_brute_force_search():
+    from coloradar.dsp.tdm import overlap_pairs
+
+    for name in ("cascade", "single_chip"):
+        calib = preset_radar(name)
+        pos = calib.antenna.virtual.positions                  # (tx, rx, 2)
+        ntx, nrx = pos.shape[:2]
+        want = set()
+        for a in range(ntx * nrx):
+            for b in range(a):
+                ta, tb = divmod(a, nrx)[0], divmod(b, nrx)[0]
+                if ta != tb and np.allclose(pos[divmod(a, nrx)], pos[divmod(b, nrx)]):
+                    want.add((a, b))
+        op = overlap_pairs(calib.antenna.virtual)
+        got = {(max(a, b), min(a, b)) for a, b in zip(op.a, op.b, strict=True)}
+        assert got == want
+        np.testing.assert_array_equal(op.slot_difference, op.a // nrx - op.b // nrx)
+    assert len(overlap_pairs(preset_radar("cascade").antenna.virtual)) == 58
+
+
+def test_alias_scores_peak_at_the_true_alias():
+    """Channels of a target at true Doppler k + m·n after compensation at k: TX t keeps the
+    phase 2π·m·t/Ntx (the formula of the module notes); the pair score is 1 at m only."""
+    from coloradar.dsp.tdm import alias_hypotheses, alias_phase, overlap_pairs
+
+    calib = preset_radar("cascade")
+    w = calib.waveform
+    ntx = w.num_tx
+    op = overlap_pairs(calib.antenna.virtual)
+    hyps = alias_hypotheses(ntx, w.max_velocity, 100.0)
+    assert len(hyps) == ntx and len(set((hyps % ntx).tolist())) == ntx
+    g = np.random.default_rng(0)
+    geo = np.exp(1j * g.uniform(-np.pi, np.pi, calib.antenna.virtual.num_unique))
+    for m in (-2, -1, 1, 3):
+        t = np.arange(ntx)[:, None]
+        x = geo[calib.antenna.virtual.index] * np.exp(2j * np.pi * m * t / ntx)   # (tx, rx)
+        s = op.scores(x.reshape(1, -1), hyps)[0]
+        assert hyps[np.argmax(s)] == m and s.max() == pytest.approx(1.0)
+        fixed = x * alias_phase(ntx, np.array(m))[:, None]
+        np.testing.assert_allclose(fixed, geo[calib.antenna.virtual.index], atol=1e-6)
+    assert alias_hypotheses(ntx, w.max_velocity, 0.0).tolist() == [0]
+    assert alias_hypotheses(ntx, w.max_velocity, 5.0).tolist() == [0, 1, -1]

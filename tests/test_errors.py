@@ -236,9 +236,24 @@ def test_output_that_is_a_file_or_under_a_file(root, tmp_path, capsys):
     code, _, err = _cli(["plot", root / RUN, "--view", "range-doppler", "--out",
                          afile / "x.png"], capsys)
     assert code == 1 and "afile" in _one_error_line(err)
+    code, _, err = _cli(["odometry", root / RUN, "--radar", "single_chip", "--out", afile,
+                         "--quiet"], capsys)
+    assert code == 1 and "expected an output folder" in _one_error_line(err)
+    code, _, err = _cli(["odometry", root / RUN, "--radar", "single_chip", "--out",
+                         afile / "sub", "--quiet"], capsys)
+    assert code == 1 and "afile" in _one_error_line(err)
     assert afile.read_text() == "keep me"
     with pytest.raises(WriteError):
         fm.write_timestamps(afile / "timestamps.txt", np.zeros(2))
+
+
+def test_map_checks_the_output_name_before_reading(root, tmp_path, capsys, monkeypatch):
+    def no_reading(*a, **k):  # the name is refused before any frame is read
+        raise AssertionError("read a frame")
+
+    monkeypatch.setattr(cr.dataset.FrameStream, "read", no_reading)
+    code, _, err = _cli(["map", root / RUN, "--out", tmp_path / "m.txt"], capsys)
+    assert code == 1 and ".pcd or .ply" in _one_error_line(err)
 
 
 def test_cfar_window_settings(root, tmp_path, capsys):
@@ -391,3 +406,17 @@ def test_animation_scenes_skip_and_report_a_bad_frame(copy):
     assert scene.radars  # the other sensors are still drawn
     t_good = float(seq.lidar.pointclouds.timestamps[2])
     assert gather_scene(seq, t_good, cache=cache).lidar is not None
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this platform")
+def test_every_file_reader_refuses_a_fifo(tmp_path):
+    from coloradar.sim.scene import load_scene
+
+    readers = {"map.pcd": cr.geometry.read_point_file, "map.ply": cr.geometry.read_point_file,
+               "trajectory.txt": cr.odometry.read_tum, "scene.json": load_scene,
+               "run.zip": cr.open_sequence}
+    for name, reader in readers.items():
+        fifo = tmp_path / name
+        os.mkfifo(fifo)
+        exc = _finishes(lambda reader=reader, fifo=fifo: reader(fifo))
+        assert isinstance(exc, ReadError) and str(fifo) in str(exc), (name, exc)

@@ -190,7 +190,11 @@ def test_channel_errors_are_undone_by_the_design_calibration_formula():
     calib = preset_radar("cascade")
     pf = make_channel_errors(calib, np.random.default_rng(5))
     assert np.all((pf.frequency > 50.8) & (pf.frequency < 51.5))
-    np.testing.assert_allclose(np.abs(pf.phase), 1.0)
+    amp = np.abs(pf.phase)
+    # Gain mismatch as in the real file (amplitudes spread ~7x, nearly a TX gain x an RX gain).
+    assert 6.0 < amp.max() / amp.min() < 8.0
+    sv = np.linalg.svd(np.log(amp) - np.log(amp).mean(), compute_uv=False)
+    assert sv[2] < 0.5 * sv[0]
     assert pf.slope == calib.waveform.slope and pf.sample_rate == calib.waveform.sample_rate
     targets = RadarTargets(np.array([[3.0, 0.8, 0.3]]), np.array([[0.4, 0.0, 0.0]]),
                            np.array([500.0 + 0j]), np.array([0]))
@@ -207,6 +211,35 @@ def test_channel_errors_are_undone_by_the_design_calibration_formula():
     fixed = (bad * np.exp(-2j * np.pi * df[:, :, None, None] * n / ns)
              * (pf.phase[0, 0] / pf.phase)[:, :, None, None])
     np.testing.assert_allclose(fixed, clean, atol=1e-4 * np.abs(clean).max())
+
+
+def test_noise_enters_before_the_receive_gain():
+    """Receiver noise is scaled by the RX part of a channel's gain, not by the TX power: after
+    the calibration (÷ the whole gain) channel (t, r) carries noise power 2σ²/a_t²."""
+    from coloradar.sim import apply_channel_errors, tx_gains
+
+    calib = preset_radar("cascade")
+    pf = make_channel_errors(calib, np.random.default_rng(7))
+    model = RADAR_MODELS["cascade"]
+    empty = RadarTargets(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, complex),
+                         np.zeros(0, np.int64))
+    frame = radar_frame(calib, model, empty, channel_errors=pf, coupling_adc=None,
+                        rng=np.random.default_rng(1))
+    # Undo the errors with the calibration formula (apply_channel_errors' inverse).
+    n = np.arange(calib.waveform.num_samples)
+    undo = (np.exp(-2j * np.pi * pf.relative_frequency()[:, :, None] * n / n.size)
+            * pf.relative_phase()[:, :, None])
+    fixed = frame * undo[:, :, None, :]
+    power = np.mean(np.abs(fixed) ** 2, axis=(2, 3))                      # (tx, rx)
+    a = np.exp(np.log(np.abs(1.0 / pf.relative_phase())).mean(axis=1))
+    a = a / np.exp(np.log(a).mean())
+    np.testing.assert_allclose(tx_gains(pf), a, rtol=1e-9)
+    expected = 2.0 * model.noise_std**2 / a[:, None] ** 2
+    # 4096 samples per channel: 1.6 % standard error; 192 channels stay within 4.5 sigma
+    np.testing.assert_allclose(power / np.broadcast_to(expected, power.shape), 1.0, atol=0.075)
+    assert abs(np.mean(power / expected) - 1.0) < 0.01
+    assert np.ptp(np.log(a)) > np.log(2.0)           # the TX gains do differ
+    assert apply_channel_errors is not None
 
 
 def test_onboard_points_sit_on_truth_targets():

@@ -46,6 +46,7 @@ from .calib import (
 )
 from .dataset import FrameStream, Sequence, open_sequence
 from .errors import MissingDataError, SettingsError
+from .formats.source import read_file_text
 
 __all__ = [
     "get_adc_frame",
@@ -88,9 +89,7 @@ def _sequence(seq_dir: PathLike, params: Params | None) -> Sequence:
 
 def _read(text_path: PathLike) -> tuple[str, str]:
     p = Path(text_path)
-    if not p.is_file():
-        raise MissingDataError(f"{p}: file not found")
-    return p.read_text(encoding="utf-8"), str(p)
+    return read_file_text(p), str(p)  # MissingDataError, or ReadError for a FIFO, a folder...
 
 
 def _frame(stream: FrameStream, index: int, seq_dir: PathLike) -> np.ndarray:

@@ -242,7 +242,7 @@ def _prepare(job: _RunJob, prods: tuple[str, ...], overwrite: bool) -> None:
                         f"{folder}: holds {p} that process_manifest.json does not record as "
                         "made by coloradar; not deleting them, even with --overwrite: choose "
                         "another output folder")
-            data.mkdir(parents=True, exist_ok=True)
+            make_output_dir(data)
             folders += [folder, data]
             entries[f"{rj.radar}/{p}"] = {"settings": rj.settings_rec,
                                           "calibration_sha256": rj.calib_key}
@@ -457,7 +457,7 @@ def process_targets(targets: Sequence[RunTarget], report_path: str | os.PathLike
             report.finish(time.perf_counter() - t0)
             if report_path is not None:
                 rp = Path(report_path)
-                rp.parent.mkdir(parents=True, exist_ok=True)
+                make_output_dir(rp.parent)
                 clean_partial_files([rp.parent], rp.name)
                 report.write(report_path)
     return report

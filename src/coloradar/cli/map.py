@@ -7,6 +7,7 @@ import sys
 
 from ..dataset import open_sequence
 from ..geometry import MAP_SOURCES, build_map, write_point_file
+from ..geometry.cloud_io import check_point_file_name
 from ..progress import Progress
 from ._common import add_file_output_args, new_output_file
 
@@ -38,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    out = new_output_file(args.out, args.overwrite)
+    out = new_output_file(str(check_point_file_name(args.out)), args.overwrite)
     seq = open_sequence(args.run, calib=args.calib, products=args.products)
     m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
                   voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,

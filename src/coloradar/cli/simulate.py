@@ -31,6 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "number in the run's name")
     p.add_argument("--motion", choices=list(MOTION_PROFILES), default="smooth",
                    help="rig motion profile (default smooth)")
+    p.add_argument("--speed", type=float, default=None, metavar="M_PER_S",
+                   help="nominal rig speed in m/s (default: the scene's); above 1.76 m/s the "
+                        "cascade's Doppler folds")
     p.add_argument("--sensors", default=",".join(SENSOR_CHOICES),
                    help=f"comma-separated subset of {','.join(SENSOR_CHOICES)} (default: all)")
     p.add_argument("--vicon", action="store_true", help="also write vicon/ poses (100 Hz)")
@@ -69,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     prog = StageProgress("simulate", enabled=not args.quiet)
     try:
         res = simulate_run(args.out, scene=args.scene, duration=args.duration, seed=args.seed,
-                           motion=args.motion, sensors=sensors, vicon=args.vicon,
+                           motion=args.motion, speed=args.speed, sensors=sensors, vicon=args.vicon,
                            heatmaps=False if args.no_heatmaps else None, name=args.name,
                            overwrite=args.overwrite, progress=prog, layout=args.layout)
     finally:

@@ -20,6 +20,16 @@ Rohling 1983):
 
 GO, SO and OS are solved for ``α`` numerically. For several looks CA is an F-distribution
 quantile, ``Pfa = P(F(2L, 2NL) > α)``, and GO/SO/OS are integrated numerically.
+
+**Correlated training cells.** Windowed FFT bins are correlated (Hann: adjacent powers have
+correlation 0.44), so the mean of ``N`` training cells fluctuates more than that of ``N``
+independent ones, and a threshold computed for ``N`` fires too often. For complex Gaussian
+noise the powers of two bins ``Δ`` apart correlate by ``|ρ(Δ)|²``, ``ρ(Δ) = Σ w_k² e^{−j2πΔk/n}
+/ Σ w_k²`` (``w`` the window, ``n`` the FFT length); the mean of the training set ``T`` then has
+the variance of ``N_eff = N² / Σ_{i,j∈T} |ρ(i−j)|²`` independent cells
+(:func:`effective_train_cells`), and CA/GO/SO thresholds use ``N_eff`` (a Gamma
+approximation of the correlated mean, exact in its first two moments). ``looks`` and
+``num_train`` may therefore be non-integer.
 """
 
 from __future__ import annotations
@@ -36,17 +46,18 @@ from scipy.ndimage import correlate1d, rank_filter
 from ..errors import SettingsError
 
 __all__ = ["CFAR_EDGES", "CFAR_KINDS", "CFAREdge", "CFARKind", "CFARResult", "cfar", "cfar_scale",
-           "cfar_window", "false_alarm_rate"]
+           "cfar_window", "effective_train_cells", "false_alarm_rate", "power_correlation"]
 
 CFARKind = Literal["ca", "go", "so", "os"]
 """Cell-averaging, greatest-of, smallest-of, ordered-statistic."""
 CFAR_KINDS: tuple[CFARKind, ...] = get_args(CFARKind)
-CFAREdge = Literal["wrap", "mirror", "reflect"]
+CFAREdge = Literal["wrap", "mirror", "reflect", "truncate"]
 """Edge handling of one axis (see :func:`cfar`)."""
 CFAR_EDGES: tuple[CFAREdge, ...] = get_args(CFAREdge)
 # name -> (scipy.ndimage mode, np.pad mode)
-_MODES: dict[CFAREdge, tuple[str, Literal["wrap", "reflect", "symmetric"]]] = {
-    "wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"), "reflect": ("reflect", "symmetric")}
+_MODES: dict[CFAREdge, tuple[str, Literal["wrap", "reflect", "symmetric", "constant"]]] = {
+    "wrap": ("wrap", "wrap"), "mirror": ("mirror", "reflect"), "reflect": ("reflect", "symmetric"),
+    "truncate": ("constant", "constant")}
 
 
 @dataclass(frozen=True)
@@ -62,13 +73,13 @@ class CFARResult:
     noise
         float64: the noise statistic ``Z`` per cell.
     scale
-        The multiplier ``α``.
+        The multiplier ``α`` (a per-cell map with ``mode="truncate"``).
     """
 
     detections: np.ndarray
     threshold: np.ndarray
     noise: np.ndarray
-    scale: float
+    scale: float | np.ndarray
 
 
 def _per_axis(v: int | tuple[int, ...], ndim: int, what: str) -> tuple[int, ...]:
@@ -90,6 +101,76 @@ def cfar_window(guard: tuple[int, ...], train: tuple[int, ...], split_axis: int 
     return outer - inner, half_outer - half_inner
 
 
+def power_correlation(window: np.ndarray, fft_size: int, max_lag: int) -> np.ndarray:
+    """Correlation of noise powers ``|ρ(Δ)|²`` of FFT bins ``Δ = 0 … max_lag`` apart.
+
+    Parameters
+    ----------
+    window
+        float ``(n,)``: the taper applied before the FFT (any scale).
+    fft_size
+        FFT length (≥ ``n``; zero padding makes neighbouring bins more alike).
+    max_lag
+        Largest lag returned.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 ``(max_lag + 1,)``, 1 at lag 0.
+    """
+    w2 = np.asarray(window, dtype=np.float64) ** 2
+    k = np.arange(w2.size)
+    lags = np.arange(max_lag + 1)
+    rho = (w2[None, :] * np.exp(-2j * np.pi * lags[:, None] * k[None, :] / fft_size)).sum(1)
+    return np.abs(rho / w2.sum()) ** 2
+
+
+def effective_train_cells(guard: tuple[int, ...], train: tuple[int, ...],
+                          correlation: tuple[np.ndarray, ...], split_axis: int = -1,
+                          wrap: tuple[int | None, ...] | None = None) -> tuple[float, float]:
+    """Independent-cell equivalents ``N_eff`` of the training set and of one GO/SO half.
+
+    Parameters
+    ----------
+    guard, train
+        Half-widths per axis.
+    correlation
+        Per axis, ``|ρ(Δ)|²`` for ``Δ = 0, 1, …`` (:func:`power_correlation`); lags beyond
+        the array count as uncorrelated. The map's correlation is their product (separable
+        windows).
+    split_axis
+        GO/SO split axis.
+    wrap
+        Per axis, the axis length when it wraps (circular lags), else None.
+
+    Returns
+    -------
+    tuple
+        ``(N_eff, n_eff)`` as floats (``N²/Σ_{i,j}|ρ_ij|²`` over all / one half's cells).
+    """
+    nd = len(guard)
+    h = [g + t for g, t in zip(guard, train, strict=True)]
+    grids = np.meshgrid(*[np.arange(-x, x + 1) for x in h], indexing="ij")
+    offs = np.stack([gr.ravel() for gr in grids], axis=1)
+    inner = np.all(np.abs(offs) <= np.asarray(guard), axis=1)
+    ax = split_axis % nd
+    wraps = wrap or (None,) * nd
+
+    def n_eff(sel: np.ndarray) -> float:
+        o = offs[sel]
+        c = np.ones((len(o), len(o)))
+        for a in range(nd):
+            lag = np.abs(o[:, None, a] - o[None, :, a])
+            period = wraps[a]
+            if period:
+                lag = np.minimum(lag, int(period) - lag)
+            r = np.asarray(correlation[a], dtype=np.float64)
+            c *= np.where(lag < r.size, r[np.minimum(lag, r.size - 1)], 0.0)
+        return float(len(o) ** 2 / c.sum()) if len(o) else 0.0
+
+    return n_eff(~inner), n_eff(~inner & (offs[:, ax] < 0))
+
+
 def _os_rank(rank: float | int, n: int) -> int:
     if isinstance(rank, (int, np.integer)) and not isinstance(rank, bool) and rank >= 1:
         k = int(rank)
@@ -100,8 +181,8 @@ def _os_rank(rank: float | int, n: int) -> int:
     return k
 
 
-def false_alarm_rate(kind: CFARKind, scale: float, num_train: int, *, rank: int = 0,
-                     looks: int = 1, numeric: bool = False) -> float:
+def false_alarm_rate(kind: CFARKind, scale: float, num_train: float, *, rank: int = 0,
+                     looks: float = 1, numeric: bool = False) -> float:
     """False-alarm probability of a CFAR with multiplier ``scale`` on noise-only cells.
 
     Parameters
@@ -111,16 +192,20 @@ def false_alarm_rate(kind: CFARKind, scale: float, num_train: int, *, rank: int 
     scale
         ``α``.
     num_train
-        ``N`` for CA and OS; cells per half ``n`` for GO and SO.
+        ``N`` for CA and OS; cells per half ``n`` for GO and SO (may be an effective,
+        non-integer count for CA/GO/SO).
     rank
         ``k`` (1-based) for OS.
     looks
-        Unit exponentials summed per cell (1 = square-law single look).
+        Unit exponentials summed per cell (1 = square-law single look; non-integer = Gamma).
     numeric
         Integrate numerically even where a closed form exists (to cross-check them).
     """
-    a, n, L = float(scale), int(num_train), int(looks)
-    if L == 1 and not numeric:
+    a, n, L = float(scale), float(num_train), float(looks)
+    if kind == "os":
+        n = round(n)
+    if L == 1 and not numeric and n == int(n):
+        n = int(n)
         if kind == "ca":
             return float((1.0 + a / n) ** (-n))
         if kind in ("so", "go"):
@@ -135,7 +220,7 @@ def false_alarm_rate(kind: CFARKind, scale: float, num_train: int, *, rank: int 
     return _numeric_pfa(kind, a, n, rank, L)
 
 
-def _numeric_pfa(kind: CFARKind, a: float, n: int, k: int, L: int) -> float:
+def _numeric_pfa(kind: CFARKind, a: float, n: float, k: int, L: float) -> float:
     """``E[Q(L, α·Z)]`` over the distribution of the statistic ``Z`` (unit-exponential looks)."""
     if kind == "ca":                       # Z = mean of n cells: Gamma(nL, scale 1/n)
         g = stats.gamma(n * L, scale=1.0 / n)
@@ -150,6 +235,7 @@ def _numeric_pfa(kind: CFARKind, a: float, n: int, k: int, L: int) -> float:
                 return 2.0 * g.pdf(z) * g.cdf(z)
     elif kind == "os":                     # Z = k-th smallest of n cells of Gamma(L)
         g = stats.gamma(L)
+        n = int(n)
         logc = special.gammaln(n + 1) - special.gammaln(k) - special.gammaln(n - k + 1)
 
         def dens(z):
@@ -167,7 +253,8 @@ def _numeric_pfa(kind: CFARKind, a: float, n: int, k: int, L: int) -> float:
 
 
 @lru_cache(maxsize=256)
-def cfar_scale(kind: CFARKind, num_train: int, pfa: float, *, rank: int = 0, looks: int = 1) -> float:
+def cfar_scale(kind: CFARKind, num_train: float, pfa: float, *, rank: int = 0,
+               looks: float = 1) -> float:
     """The multiplier ``α`` that gives false-alarm probability ``pfa``.
 
     Parameters are as in :func:`false_alarm_rate` (``num_train`` = cells per half for GO/SO).
@@ -178,7 +265,9 @@ def cfar_scale(kind: CFARKind, num_train: int, pfa: float, *, rank: int = 0, loo
         raise SettingsError(f"pfa must lie in (0, 1), got {pfa!r}")
     if num_train < 1:
         raise SettingsError("a CFAR window needs at least one training cell")
-    n, L = int(num_train), int(looks)
+    n, L = float(num_train), float(looks)
+    if kind == "os":
+        n = round(n)
     if kind == "ca" and L == 1:
         return float(n * (pfa ** (-1.0 / n) - 1.0))
     if kind == "ca":
@@ -228,8 +317,8 @@ def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tupl
 
 def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] = 1,
          train: int | tuple[int, ...] = 8, pfa: float = 1e-3, *, rank: float | int = 0.75,
-         looks: int = 1, mode: CFAREdge | tuple[CFAREdge, ...] = "wrap", split_axis: int = -1
-         ) -> CFARResult:
+         looks: float = 1, mode: CFAREdge | tuple[CFAREdge, ...] = "wrap", split_axis: int = -1,
+         cell_factor: float = 1.0, excise: bool = False) -> CFARResult:
     """Run a CFAR detector on a power map of any dimension.
 
     Parameters
@@ -248,9 +337,23 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
         Independent exponentials summed per cell (see the module notes).
     mode
         Edge handling per axis: ``"wrap"`` (circular, e.g. Doppler), ``"mirror"``
-        (``d c b | a b c d``) or ``"reflect"`` (``c b a | a b c d``).
+        (``d c b | a b c d``), ``"reflect"`` (``c b a | a b c d``) or ``"truncate"`` (CA/GO/SO
+        only: training cells beyond the edge are left out, the estimate is the mean of those
+        inside and ``α`` is computed for their number, so ``pfa`` holds at the edges too;
+        mirrored cells repeat cells and make the estimate noisier than its count says).
     split_axis
         GO/SO: axis along which the training cells are split into two halves.
+    cell_factor
+        Independent-cell equivalent of one training cell (``N_eff/N`` from
+        :func:`effective_train_cells` for maps with correlated cells); ``α`` is computed for
+        ``cell_factor`` times the training cells used.
+    excise
+        CA/GO/SO: run twice; cells above the first pass's threshold are replaced by their
+        first-pass noise estimate before the second. A strong target inside another cell's
+        training window otherwise raises that cell's estimate by its power over ``N`` (a
+        60 dB target in 132 cells: +39 dB) and masks weaker targets near it. On noise alone
+        a fraction ``pfa`` of cells is replaced by a local mean, which leaves the false-alarm
+        rate as it was.
 
     Returns
     -------
@@ -268,17 +371,37 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
             raise SettingsError(f"axis {ax} has {x.shape[ax]} cells, too few for a window of "
                                 f"half-width {h[ax]} with mode {m!r}")
     n_all, n_half = cfar_window(g, t, split_axis)
+    truncate = "truncate" in modes
+    if truncate and kind == "os":
+        raise SettingsError("mode 'truncate' is for CA/GO/SO; OS needs a full window "
+                         "('mirror' or 'reflect')")
+    if excise and kind != "os":
+        first = cfar(x, kind, g, t, pfa, rank=rank, looks=looks, mode=modes,
+                     split_axis=split_axis, cell_factor=cell_factor)
+        if first.detections.any():
+            x = np.where(first.detections, first.noise, x)
+            res = cfar(x, kind, g, t, pfa, rank=rank, looks=looks, mode=modes,
+                       split_axis=split_axis, cell_factor=cell_factor)
+            power = np.asarray(power, dtype=np.float64)
+            return CFARResult(power > res.threshold, res.threshold, res.noise, res.scale)
+        return first
+    alpha: float | np.ndarray
     if kind == "ca":
-        noise = _ring_sum(x, g, h, modes) / n_all
-        scale = cfar_scale("ca", n_all, pfa, looks=looks)
+        count = _ring_sum(np.ones_like(x), g, h, modes) if truncate else float(n_all)
+        noise = _ring_sum(x, g, h, modes) / count
+        alpha = _alpha_for(kind, count, cell_factor, pfa, 0, looks)
     elif kind in ("go", "so"):
         if n_half < 1:
             raise SettingsError("GO/SO-CFAR needs training cells on both sides of split_axis")
         ax = split_axis % nd
-        lead = _ring_sum(x, g, h, modes, -1, ax) / n_half
-        lag = _ring_sum(x, g, h, modes, 1, ax) / n_half
+        ones = np.ones_like(x)
+        c_lead = _ring_sum(ones, g, h, modes, -1, ax) if truncate else float(n_half)
+        c_lag = _ring_sum(ones, g, h, modes, 1, ax) if truncate else float(n_half)
+        lead = _ring_sum(x, g, h, modes, -1, ax) / np.maximum(c_lead, 1.0)
+        lag = _ring_sum(x, g, h, modes, 1, ax) / np.maximum(c_lag, 1.0)
         noise = np.maximum(lead, lag) if kind == "go" else np.minimum(lead, lag)
-        scale = cfar_scale(kind, n_half, pfa, looks=looks)
+        # Unequal halves at an edge: the threshold of the smaller one (conservative for GO).
+        alpha = _alpha_for(kind, np.minimum(c_lead, c_lag), cell_factor, pfa, 0, looks)
     elif kind == "os":
         k = _os_rank(rank, n_all)
         fp = np.ones([2 * v + 1 for v in h], dtype=bool)
@@ -292,8 +415,20 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
         # footprint with holes (the guard cells) as solid (seen with SciPy 1.17).
         full = rank_filter(padded[None], rank=k - 1, footprint=fp[None], mode="constant")[0]
         noise = full[tuple(slice(v, v + s) for v, s in zip(h, x.shape, strict=True))]
-        scale = cfar_scale("os", n_all, pfa, rank=k, looks=looks)
+        alpha = cfar_scale("os", n_all, pfa, rank=k, looks=looks)
     else:
         raise SettingsError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
-    threshold = scale * noise
-    return CFARResult(x > threshold, threshold, noise, scale)
+    threshold = alpha * noise
+    return CFARResult(x > threshold, threshold, noise, alpha)
+
+
+def _alpha_for(kind: str, count: float | np.ndarray, factor: float, pfa: float, rank: int,
+               looks: float) -> float | np.ndarray:
+    """``α`` for ``count`` training cells (a scalar or a per-cell map of counts)."""
+    if not isinstance(count, np.ndarray):
+        return cfar_scale(kind, float(count) * factor, pfa, rank=rank, looks=looks)
+    counts = np.rint(count).astype(np.int64)
+    values, inverse = np.unique(counts, return_inverse=True)
+    table = np.array([cfar_scale(kind, max(float(v), 1.0) * factor, pfa, rank=rank, looks=looks)
+                      for v in values])
+    return table[inverse].reshape(counts.shape)

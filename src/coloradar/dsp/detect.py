@@ -19,7 +19,8 @@ from ..errors import FormatError
 from .array import sines_to_unit
 from .cfar import CFAREdge, CFARKind, cfar
 
-__all__ = ["Detections", "heatmap_cell_xyz", "heatmap_pointcloud", "local_maxima"]
+__all__ = ["Detections", "channel_noise", "heatmap_cell_xyz", "heatmap_pointcloud", "local_maxima",
+           "sidelobe_envelope", "sidelobe_mask"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,8 +44,13 @@ class Detections:
     power
         float64: range–Doppler power (sum over virtual channels) of the cell.
     snr
-        float64: ``power`` over the CFAR noise estimate of the cell.
+        float64: the detection statistic over its CFAR noise estimate (with noise whitening,
+        of the whitened sum).
+    alias
+        int64 or None: the Doppler alias ``m`` chosen per detection (range rate =
+        folded rate + ``2m·v_max``); None when no search ran.
     """
+
 
     range_bin: np.ndarray
     doppler_bin: np.ndarray
@@ -56,6 +62,7 @@ class Detections:
     intensity: np.ndarray
     power: np.ndarray
     snr: np.ndarray
+    alias: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.range_bin.size)
@@ -72,6 +79,119 @@ class Detections:
 def local_maxima(power: np.ndarray, mode: CFAREdge | tuple[CFAREdge, ...]) -> np.ndarray:
     """bool mask of cells not smaller than any of their neighbours (3 cells per axis)."""
     return power >= maximum_filter(power, size=3, mode=mode)
+
+
+def channel_noise(power: np.ndarray, first_range: int = 0) -> np.ndarray:
+    """Noise power of every channel of a range–Doppler power cube, robust to targets.
+
+    The median cell power over all Doppler bins and the range bins from ``first_range`` on,
+    divided by ``ln 2`` (the median of an exponential of mean σ² is ``σ²·ln 2``): targets and
+    clutter that fill less than half the cells do not move it much.
+
+    Parameters
+    ----------
+    power
+        float ``(channels, doppler, range)``: ``|·|²`` of each channel.
+    first_range
+        First range bin used (near bins hold coupling residue).
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 ``(channels,)``.
+    """
+    c = power.shape[0]
+    cells = power[:, :, first_range:].reshape(c, -1)
+    if cells.shape[1] == 0:
+        cells = power.reshape(c, -1)
+    mid = cells.shape[1] // 2
+    med = np.partition(cells, mid, axis=1)[:, mid].astype(np.float64)
+    return np.maximum(med / np.log(2.0), np.finfo(np.float64).tiny)
+
+
+def sidelobe_envelope(window: np.ndarray, fft_size: int, num_lags: int,
+                      oversample: int = 32) -> np.ndarray:
+    """Worst-case power leakage of a windowed tone into bins ``Δ = 0 … num_lags − 1`` away
+    from its peak cell, relative to that cell.
+
+    A tone lies within half a bin of its peak cell (offset ``δ``, ``|δ| ≤ ½``); the cell ``Δ``
+    bins away holds ``|W(Δ − δ)|²`` against the peak cell's ``|W(δ)|²`` (scalloping loss
+    included), so ``E(Δ) = max_{|δ|≤½} |W(Δ−δ)|² / |W(δ)|²``, ``W`` the window's DTFT in units
+    of FFT bins (zero padding included). ``E(1) = 1`` (a tone midway between two bins).
+
+    Parameters
+    ----------
+    window
+        float ``(n,)``: the taper.
+    fft_size
+        FFT length (≥ n).
+    num_lags
+        Lags returned.
+    oversample
+        Evaluation points per bin (even).
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 ``(num_lags,)``, ``E(0) = 1``.
+    """
+    w = np.asarray(window, dtype=np.float64)
+    os_ = 2 * max(1, oversample // 2)
+    n_eval = int(fft_size) * os_
+    resp = np.abs(np.fft.fft(w, n_eval)) ** 2
+    j = np.arange(-os_ // 2, os_ // 2 + 1)                      # δ = j / os_
+    lags = np.arange(num_lags)
+    num = resp[(lags[:, None] * os_ - j[None, :]) % n_eval]
+    den = resp[j % n_eval][None, :]
+    env = (num / np.maximum(den, 1e-300)).max(axis=1)
+    env[0] = 1.0
+    return np.minimum(env, 1.0)
+
+
+def sidelobe_mask(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndarray,
+                  excess: np.ndarray, env_doppler: np.ndarray, env_range: np.ndarray,
+                  num_doppler: int, margin: float) -> np.ndarray:
+    """Which candidates are *not* explained by a stronger candidate's window sidelobes.
+
+    Candidate ``i`` is a sidelobe of a stronger ``j`` when
+    ``excess_i < margin · power_j · E_d(|Δd|) · E_r(|Δr|)`` (Doppler lags circular), with
+    ``excess`` its power above the noise estimate. Separable windows make a point target's
+    range–Doppler response the product of the two, summed over channels alike.
+
+    Parameters
+    ----------
+    doppler_bin, range_bin
+        int ``(K,)``: candidate cells.
+    power, excess
+        float ``(K,)``: cell power and power above the CFAR noise estimate.
+    env_doppler, env_range
+        Envelopes from :func:`sidelobe_envelope`.
+    num_doppler
+        Doppler bins (for circular lags).
+    margin
+        Linear factor (≥ 1) on the envelope.
+
+    Returns
+    -------
+    numpy.ndarray
+        bool ``(K,)``: True = keep.
+    """
+    k = power.size
+    keep = np.ones(k, dtype=bool)
+    if k < 2:
+        return keep
+    step = max(1, (1 << 20) // k)                  # bound the (rows, K) work arrays
+    for i0 in range(0, k, step):
+        i = slice(i0, min(k, i0 + step))
+        dd = np.abs(doppler_bin[i, None] - doppler_bin[None, :])
+        dd = np.minimum(dd, num_doppler - dd)
+        dr = np.abs(range_bin[i, None] - range_bin[None, :])
+        leak = (env_doppler[np.minimum(dd, env_doppler.size - 1)]
+                * env_range[np.minimum(dr, env_range.size - 1)])        # (i, j)
+        stronger = power[None, :] > power[i, None]
+        explained = stronger & (excess[i, None] < margin * power[None, :] * leak)
+        keep[i] = ~explained.any(axis=1)
+    return keep
 
 
 def heatmap_cell_xyz(config: HeatmapConfig, el: np.ndarray, az: np.ndarray,

@@ -30,15 +30,23 @@ from ..calib.waveform import SPEED_OF_LIGHT
 from ..errors import FormatError, SettingsError
 from .angle import bartlett_spectrum, capon_spectrum, refine_peak
 from .array import OVERLAP_MODES, OverlapMode, angle_grid, combine_channels, sines_to_unit
-from .cfar import CFAR_KINDS, CFAREdge, CFARKind, cfar, cfar_scale, cfar_window
+from .cfar import (
+    CFAR_KINDS,
+    CFAREdge,
+    CFARKind,
+    cfar,
+    cfar_window,
+    effective_train_cells,
+    power_correlation,
+)
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
-from .detect import Detections, local_maxima
+from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_mask
 from .heatmap import heatmap_from_elements
-from .tdm import tdm_phase
-from .windows import WINDOWS, WindowName, coherent_window
+from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
+from .windows import WINDOWS, WindowName, coherent_window, window
 
-__all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "AngleMethod", "CouplingDomain", "ProcessingSettings",
-           "RadarProcessor"]
+__all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AngleMethod", "CouplingDomain",
+           "NoiseWeighting", "ProcessingSettings", "RadarProcessor"]
 
 CouplingDomain = Literal["raw", "calibrated"]
 """What the coupling file is the range FFT of: uncalibrated or calibrated samples."""
@@ -46,6 +54,9 @@ COUPLING_DOMAINS: tuple[CouplingDomain, ...] = get_args(CouplingDomain)
 AngleMethod = Literal["fft", "capon"]
 """Detection angles by Bartlett (FFT) or Capon (MVDR) beamforming."""
 ANGLE_METHODS: tuple[AngleMethod, ...] = get_args(AngleMethod)
+NoiseWeighting = Literal["whiten", "off"]
+"""How channels are summed for detection (:attr:`ProcessingSettings.noise_weighting`)."""
+NOISE_WEIGHTINGS: tuple[NoiseWeighting, ...] = get_args(NoiseWeighting)
 
 
 @dataclass(frozen=True)
@@ -79,7 +90,32 @@ class ProcessingSettings:
     cfar_kind, cfar_guard, cfar_train, pfa, cfar_rank
         CFAR on the range–Doppler power map; guard/train are (Doppler, range) half-widths;
         ``pfa`` the false-alarm probability per cell for noise (the map sums Ntx·Nrx channels,
-        and the threshold accounts for it); ``cfar_rank`` the OS rank fraction.
+        and the threshold accounts for it and for the windows' correlation of neighbouring
+        cells); ``cfar_rank`` the OS rank fraction.
+    cfar_excision
+        CA/GO/SO: a second CFAR pass with the first pass's detections replaced by their noise
+        estimate, so that a strong target does not mask weaker ones within its training
+        window (:func:`coloradar.dsp.cfar.cfar`).
+    noise_weighting
+        How the channels are summed for detection. ``"whiten"``: each channel weighted by the
+        inverse of its noise power, estimated from the frame (median cell power beyond
+        ``min_range``), so that noise in the sum is a proper Ntx·Nrx-look chi-square whatever
+        the channel gains and calibration; ``"off"``: plain sum, all channels assumed
+        equally noisy (the chain before issue 10; false alarms grow with the gain spread).
+    doppler_unwrap
+        Largest ``|range rate|`` [m/s] searched beyond ±v_max: each detection tests the TDM
+        alias hypotheses whose range rate stays within it (at most Ntx of them) and keeps the
+        best (:mod:`coloradar.dsp.tdm`); 0 switches the search off (folded range rates, and
+        angles compensated for the folded Doppler).
+    heatmap_unwrap
+        Heatmaps with disambiguated Doppler: cells that pass the CFAR are compensated for
+        their best alias hypothesis before the angle FFT, and channel 1 carries the unwrapped
+        range rate (see :meth:`RadarProcessor.heatmap`).
+    sidelobe_guard, sidelobe_margin_db
+        Drop detections that a stronger one's window sidelobes explain: a candidate ``Δd``
+        Doppler and ``Δr`` range bins from a stronger one of power ``P`` is dropped when its
+        power above the CFAR noise is below ``P·E_d(Δd)·E_r(Δr)`` times the margin, ``E`` the
+        windows' worst-case sidelobe envelopes.
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping
@@ -114,6 +150,12 @@ class ProcessingSettings:
     cfar_train: tuple[int, int] = (2, 8)
     pfa: float = 1e-4
     cfar_rank: float = 0.75
+    cfar_excision: bool = True
+    noise_weighting: NoiseWeighting = "whiten"
+    doppler_unwrap: float = 5.0
+    heatmap_unwrap: bool = False
+    sidelobe_guard: bool = True
+    sidelobe_margin_db: float = 6.0
     min_range: float = 0.3
     peak_grouping: bool = True
     angle_method: AngleMethod = "fft"
@@ -125,6 +167,7 @@ class ProcessingSettings:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
                    "coupling_domain": COUPLING_DOMAINS, "overlap": OVERLAP_MODES,
                    "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
+                   "noise_weighting": NOISE_WEIGHTINGS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1)}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
@@ -132,6 +175,9 @@ class ProcessingSettings:
                                     f"{', '.join(map(str, allowed))}")
         if not 0.0 < self.pfa < 1.0:
             raise SettingsError(f"pfa must lie in (0, 1), got {self.pfa!r}")
+        if not self.doppler_unwrap >= 0:
+            raise SettingsError(f"doppler_unwrap must be >= 0 m/s (0 = off), got "
+                                f"{self.doppler_unwrap!r}")
         if self.angle_oversample < 1 or self.capon_loading <= 0:
             raise SettingsError("angle_oversample must be >= 1 and capon_loading > 0")
         for name in ("cfar_guard", "cfar_train"):
@@ -263,12 +309,42 @@ class RadarProcessor:
                                          s.azimuth_sign, s.elevation_sign)
         dg = self.detection_grid
         self._visible = (dg.az_sines[None, :] ** 2 + dg.el_sines[:, None] ** 2) <= 1.0
-        # The map sums ntx·nrx channels of independent noise: that many exponential looks.
+        self._init_detection()
+
+    def _init_detection(self) -> None:
+        """What detection needs beyond the cube: CFAR counts, alias hypotheses, envelopes."""
+        s, w = self.settings, self.calib.waveform
+        ntx, nrx, nc, ns = w.frame_shape
+        nd = self.doppler_fft_size
+        # The map sums ntx·nrx channels of independent noise: that many exponential looks
+        # (with "whiten"; "looks" replaces it per frame by the effective number).
         self._looks = ntx * nrx
+        # Windowed FFT bins are correlated: the training mean counts as fewer independent
+        # cells (cfar.effective_train_cells).
+        h = [g + t for g, t in zip(s.cfar_guard, s.cfar_train, strict=True)]
+        corr = (power_correlation(window(s.doppler_window, nc), nd, 2 * h[0]),
+                power_correlation(window(s.range_window, ns), self.range_fft_size, 2 * h[1]))
         n_all, n_half = cfar_window(s.cfar_guard, s.cfar_train, split_axis=1)
-        cfar_scale(s.cfar_kind, n_half if s.cfar_kind in ("go", "so") else n_all, s.pfa,
-                   rank=round(s.cfar_rank * n_all) if s.cfar_kind == "os" else 0,
-                   looks=self._looks)                                   # cached for detect()
+        n_half = max(n_half, 1)
+        e_all, e_half = effective_train_cells(s.cfar_guard, s.cfar_train, corr, split_axis=1,
+                                              wrap=(nd, None))
+        self._cell_factor = {"ca": e_all / n_all, "go": e_half / n_half,
+                             "so": e_half / n_half, "os": 1.0}[s.cfar_kind]
+        # Doppler disambiguation (coloradar.dsp.tdm).
+        limit = s.doppler_unwrap if (s.tdm_compensation and ntx > 1) else 0.0
+        vmax = 0.5 * nd * (self.velocities[1] - self.velocities[0])
+        self._aliases = alias_hypotheses(ntx, vmax, limit)
+        pairs = overlap_pairs(self.calib.antenna.virtual)
+        self._pairs = pairs if pairs.resolves(self._aliases) else None
+        # Range bins notched by DC removal: the window's half-width in bins, zero padding
+        # included (periodic Hann: 3 taps, Blackman: 5).
+        taps = {"none": 0, "hann": 1, "blackman": 2}[s.range_window]
+        self._notch_bins = (int(np.ceil((taps + 1) * self.range_fft_size / ns))
+                            if s.dc_removal else 0)
+        # Sidelobe envelopes (Doppler wraps: lags up to nd//2).
+        self._env_d = sidelobe_envelope(window(s.doppler_window, nc), nd, nd // 2 + 1)
+        self._env_r = sidelobe_envelope(window(s.range_window, ns), self.range_fft_size,
+                                        self.num_range_bins)
 
     # ------------------------------------------------------------------ cubes
     def _check(self, adc: np.ndarray) -> np.ndarray:
@@ -331,14 +407,54 @@ class RadarProcessor:
         numpy.ndarray
             float32 ``(el, az, range, 2)`` on :meth:`heatmap_config`'s grid: channel 0 the peak
             over Doppler of the angle spectrum's power (a target of amplitude ``a`` per channel
-            gives ``|a|²``), channel 1 the range rate of that peak [m/s].
+            gives ``|a|²``), channel 1 the range rate of that peak [m/s]: the centre of the
+            peak's Doppler bin, *folded* into ``[−v_max, v_max)``, with the angle spectrum
+            TDM-compensated for that folded bin. With ``heatmap_unwrap`` the cells that pass
+            the CFAR are compensated for their best Doppler alias and channel 1 carries the
+            unwrapped rate (:meth:`_heatmap_unwrapped`).
         """
-        return self._heatmap(self.range_doppler(adc))
+        rd = self.range_doppler(adc)
+        return self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap else self._heatmap(rd)
 
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
                                      workers=self.settings.workers)
+
+    def _heatmap_unwrapped(self, rd: np.ndarray) -> np.ndarray:
+        """Heatmap with disambiguated Doppler (``heatmap_unwrap``), through the same kernel.
+
+        Cells of the range–Doppler map that pass the CFAR get their best alias hypothesis
+        (as detections do, at the bin centre); their channels are compensated for it before
+        the kernel forms the peak-over-Doppler heatmap, and channel 1 of every output cell
+        whose peak came from such a cell carries ``folded rate + 2m·v_max``. Cells below
+        the CFAR keep the folded compensation and rate (noise has no Doppler to unwrap).
+        """
+        hyps = self._aliases
+        if hyps.size < 2:
+            return self._heatmap(rd)
+        stat, _, looks = self._detection_map(rd)
+        mask, _ = self._cfar_mask(stat, looks)
+        d, r = np.nonzero(mask)
+        if d.size == 0:
+            return self._heatmap(rd)
+        nd = rd.shape[2]
+        alias, _ = self._choose_alias(rd[:, :, d, r], (d - nd // 2).astype(np.float64))
+        assert alias is not None
+        moved = alias != 0
+        d, r, alias = d[moved], r[moved], alias[moved]
+        if d.size == 0:
+            return self._heatmap(rd)
+        rd = rd.copy()
+        rd[:, :, d, r] *= alias_phase(rd.shape[0], alias)[:, None, :]
+        out = self._heatmap(rd)
+        m_map = np.zeros(stat.shape, dtype=np.int64)
+        m_map[d, r] = alias
+        dv = self.velocities[1] - self.velocities[0]
+        di = np.clip(np.rint(out[..., 1] / dv).astype(np.int64) + nd // 2, 0, nd - 1)
+        ri = np.arange(out.shape[2])[None, None, :]
+        out[..., 1] += (m_map[di, ri] * (nd * dv)).astype(np.float32)
+        return out
 
     def heatmap_config(self) -> HeatmapConfig:
         """The grid of :meth:`heatmap` with the true angles of its bins (for heatmap_cfg.txt).
@@ -362,47 +478,140 @@ class RadarProcessor:
         rcube = self._range_cube(adc)
         return self._detect(rcube, self._doppler(rcube))
 
+    def _detection_map(self, rd: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), and
+        the looks the CFAR threshold is computed for (``noise_weighting``)."""
+        s = self.settings
+        ntx, nrx, nd, nr = rd.shape
+        mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
+        np.square(mag2, out=mag2)
+        plain = mag2.sum(axis=0)
+        if s.noise_weighting == "off":
+            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks
+        # Inverse-noise weights: each term a unit exponential times the mean noise power, so
+        # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
+        sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
+                             int(np.ceil(s.min_range / self.range_bin_width)))
+        wts = (sig2.mean() / sig2).astype(np.float32)
+        return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks
+
+    def _cfar_mask(self, stat: np.ndarray, looks: int) -> tuple[np.ndarray, np.ndarray]:
+        """CFAR on the detection statistic: bool mask and noise estimate, ``(doppler, range)``
+        (cells the CFAR does not test: False and +inf)."""
+        s = self.settings
+        # Range edges: training cells beyond the map are left out ("truncate"), not mirrored
+        # (mirrored copies made the edge cells fire ~5x too often). OS needs a full window.
+        cmodes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror" if s.cfar_kind == "os" else "truncate")
+        # DC removal notches the first range bins (the window spreads the notch): they would
+        # lower the noise estimate of their neighbours, so the CFAR map starts after them.
+        r0 = max(0, min(self._notch_bins, stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
+        res = cfar(stat[:, r0:], s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
+                   rank=s.cfar_rank, looks=looks, mode=cmodes, split_axis=1,
+                   cell_factor=self._cell_factor, excise=s.cfar_excision)
+        mask = np.zeros(stat.shape, dtype=bool)
+        mask[:, r0:] = res.detections
+        noise = np.full(stat.shape, np.inf)
+        noise[:, r0:] = res.noise
+        return mask, noise
+
     def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
         s = self.settings
-        power = _power_sum(rd).astype(np.float64)
+        stat, plain, looks = self._detection_map(rd)
         modes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror")   # (Doppler, range)
-        res = cfar(power, s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa, rank=s.cfar_rank,
-                   looks=self._looks, mode=modes, split_axis=1)
-        mask = res.detections
-        mask[:, : int(np.ceil(s.min_range / self.range_bin_width))] = False
+        mask, noise = self._cfar_mask(stat, looks)
         if s.peak_grouping:
-            mask &= local_maxima(power, modes)
+            mask &= local_maxima(stat, modes)
         d, r = np.nonzero(mask)
-        nd, nr = power.shape
-        d_ref = refine_peak(np.stack([power[(d - 1) % nd, r], power[d, r],
-                                      power[(d + 1) % nd, r]], axis=1), d, nd, wrap=True)
-        r_ref = refine_peak(np.stack([power[d, np.maximum(r - 1, 0)], power[d, r],
-                                      power[d, np.minimum(r + 1, nr - 1)]], axis=1),
+        if s.sidelobe_guard and d.size > 1:
+            # Candidates inside min_range still explain sidelobes, so the cut comes after.
+            keep = sidelobe_mask(d, r, stat[d, r], stat[d, r] - noise[d, r], self._env_d,
+                                 self._env_r, stat.shape[0], 10.0 ** (s.sidelobe_margin_db / 10))
+            d, r = d[keep], r[keep]
+        near = r < int(np.ceil(s.min_range / self.range_bin_width))
+        d, r = d[~near], r[~near]
+        nd, nr = stat.shape
+        d_ref = refine_peak(np.stack([stat[(d - 1) % nd, r], stat[d, r],
+                                      stat[(d + 1) % nd, r]], axis=1), d, nd, wrap=True)
+        r_ref = refine_peak(np.stack([stat[d, np.maximum(r - 1, 0)], stat[d, r],
+                                      stat[d, np.minimum(r + 1, nr - 1)]], axis=1),
                             r, nr, wrap=False)
         k_signed = d_ref - nd // 2
+        ntx = rd.shape[0]
         vecs = rd[:, :, d, r]                                           # (tx, rx, K)
         if self._tdm is not None:
             # rd holds bin-centre compensation; add the fractional remainder.
-            vecs = vecs * tdm_phase(rd.shape[0], d_ref - d, nd)[:, None, :]
-        vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T   # (K, M)
+            vecs = vecs * tdm_phase(ntx, d_ref - d, nd)[:, None, :]
+        alias, spec = self._choose_alias(vecs, k_signed)
+        if alias is not None:
+            vecs = vecs * alias_phase(ntx, alias)[:, None, :]
         if s.angle_method == "capon" and d.size:
+            vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             snaps = rcube[:, :, :, r]                                    # (tx, rx, chirp, K)
             if self._tdm is not None:
-                snaps = snaps * tdm_phase(rd.shape[0], k_signed, nd)[:, None, None, :]
+                ph = tdm_phase(ntx, k_signed, nd)
+                if alias is not None:
+                    ph = ph * alias_phase(ntx, alias)
+                snaps = snaps * ph[:, None, None, :]
             snaps = combine_channels(snaps, self.calib.antenna.virtual, s.overlap)
             spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
                                   s.capon_loading, workers=s.workers)
-        else:
+        elif spec is None:
+            vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
         uy, uz, peak = self._peak_directions(spec)
         rng = r_ref * self.range_bin_width
         unit = sines_to_unit(uy, uz)
         xyz = rng[:, None] * unit
+        k_true = k_signed + (alias * nd if alias is not None else 0)
+        flat = plain.reshape(nd, nr)
         return Detections(
             range_bin=r.astype(np.int64), doppler_bin=d.astype(np.int64), range=rng,
-            range_rate=k_signed * (self.velocities[1] - self.velocities[0]),
+            range_rate=k_true * (self.velocities[1] - self.velocities[0]),
             azimuth=np.arctan2(unit[:, 1], unit[:, 0]), elevation=np.arcsin(unit[:, 2]),
-            xyz=xyz, intensity=peak, power=power[d, r], snr=power[d, r] / res.noise[d, r])
+            xyz=xyz, intensity=peak, power=flat[d, r].astype(np.float64),
+            snr=stat[d, r] / noise[d, r], alias=alias)
+
+    def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
+                      ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`) and, when it was scored
+        by the angle spectrum, the Bartlett spectra of the winners.
+
+        ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``.
+        Returns ``(None, None)`` when the search is off.
+        """
+        hyps = self._aliases
+        if hyps.size < 2:
+            return None, None
+        ntx, nrx, k = vecs.shape
+        nd = self.doppler_fft_size
+        dv = self.velocities[1] - self.velocities[0]
+        rates = (k_signed[:, None] + hyps[None, :] * nd) * dv                  # (K, H)
+        allowed = (np.abs(rates) <= self.settings.doppler_unwrap) | (hyps[None, :] == 0)
+        spectra = None
+        if self._pairs is not None:
+            score = self._pairs.scores(vecs.reshape(ntx * nrx, k).T, hyps)
+        else:
+            g = self.detection_grid
+            ph = alias_phase(ntx, hyps)                                        # (tx, H)
+            score = np.empty((k, hyps.size))
+            spectra = np.empty((k, g.num_el, g.num_az), dtype=np.float32)
+            step = 256                                  # bounds the (K·H, el, az) spectra
+            for k0 in range(0, k, step):
+                ks = slice(k0, min(k, k0 + step))
+                kk = ks.stop - k0
+                cand = vecs[:, :, ks, None] * ph[:, None, None, :]             # (tx, rx, k, H)
+                el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
+                spec = bartlett_spectrum(g, el.reshape(el.shape[0], kk * hyps.size).T,
+                                         workers=self.settings.workers)
+                vis = np.where(self._visible[None], spec, 0.0)
+                sc = vis.reshape(kk, hyps.size, g.num_el * g.num_az).max(axis=2)
+                sc = np.where(allowed[ks], sc, -np.inf)
+                score[ks] = sc
+                spectra[ks] = spec.reshape(kk, hyps.size, g.num_el, g.num_az)[
+                    np.arange(kk), np.argmax(sc, axis=1)]
+        score = np.where(allowed, score, -np.inf)
+        best = np.argmax(score, axis=1) if k else np.zeros(0, dtype=np.int64)
+        return hyps[best], spectra
 
     def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
@@ -437,7 +646,10 @@ class RadarProcessor:
         rcube = self._range_cube(adc)
         rd = self._doppler(rcube)
         pts = self._detect(rcube, rd).pointcloud() if pointcloud else None
-        return (self._heatmap(rd) if heatmap else None), pts
+        if not heatmap:
+            return None, pts
+        return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
+                else self._heatmap(rd)), pts
 
     def __repr__(self) -> str:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)

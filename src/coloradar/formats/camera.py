@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import FormatError
+from ..errors import FormatError, SettingsError
 
 __all__ = ["IMAGE_CHANNELS", "IMAGE_DTYPES", "decode_image", "encode_image",
            "parse_camera_info"]
@@ -92,9 +92,9 @@ def encode_image(image: np.ndarray, kind: str) -> bytes:
     img = np.asarray(image)
     ch = IMAGE_CHANNELS.get(kind)
     if ch is None:
-        raise ValueError(f"unknown image kind {kind!r}; expected rgb or depth")
+        raise SettingsError(f"unknown image kind {kind!r}; expected rgb or depth")
     want = 3 if ch > 1 else 2
     if img.ndim != want or (ch > 1 and img.shape[2] != ch):
-        raise ValueError(f"expected a {'(h, w, 3)' if ch > 1 else '(h, w)'} {kind} image, "
+        raise SettingsError(f"expected a {'(h, w, 3)' if ch > 1 else '(h, w)'} {kind} image, "
                          f"got shape {img.shape}")
     return np.ascontiguousarray(img, dtype=IMAGE_DTYPES[kind]).tobytes()

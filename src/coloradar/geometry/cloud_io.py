@@ -16,9 +16,10 @@ import numpy as np
 
 from ..errors import FormatError, SettingsError
 from ..formats.atomic import atomic_write_bytes, new_output_path
+from ..formats.source import read_file_bytes
 
-__all__ = ["default_fields", "read_pcd", "read_ply", "read_point_file", "write_pcd",
-           "write_ply", "write_point_file"]
+__all__ = ["check_point_file_name", "default_fields", "read_pcd", "read_ply", "read_point_file",
+           "write_pcd", "write_ply", "write_point_file"]
 
 _PCD_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "<i1", ("I", 2): "<i2",
               ("I", 4): "<i4", ("I", 8): "<i8", ("U", 1): "<u1", ("U", 2): "<u2",
@@ -141,7 +142,7 @@ def read_pcd(path: str | os.PathLike[str]) -> tuple[np.ndarray, tuple[str, ...]]
         with ``COUNT k > 1`` become ``k`` columns ``name_0 .. name_{k-1}``.
     """
     name = str(path)
-    data = Path(path).read_bytes()
+    data = read_file_bytes(path)
     lines, pos = _split_header(data, b"DATA", name, "PCD")
     hdr = {ln.split()[0].upper(): ln.split()[1:] for ln in lines
            if ln and not ln.startswith("#")}
@@ -184,7 +185,7 @@ def read_ply(path: str | os.PathLike[str]) -> tuple[np.ndarray, tuple[str, ...]]
     properties become the columns. Returns ``(points, field names)`` as :func:`read_pcd`.
     """
     name = str(path)
-    data = Path(path).read_bytes()
+    data = read_file_bytes(path)
     lines, pos = _split_header(data, b"end_header", name, "PLY")
     if not lines or lines[0] != "ply":
         raise FormatError(f"{name}: not a PLY file (no 'ply' magic line)")
@@ -229,12 +230,25 @@ def write_point_file(path: str | os.PathLike[str], points: np.ndarray,
                      fields: Sequence[str] | None = None, *, binary: bool = True,
                      overwrite: bool = False) -> Path:
     """:func:`write_pcd` or :func:`write_ply` by the file's suffix (``.pcd``, ``.ply``)."""
-    suffix = Path(path).suffix.lower()
+    suffix = check_point_file_name(path).suffix.lower()
     if suffix == ".pcd":
         return write_pcd(path, points, fields, binary=binary, overwrite=overwrite)
-    if suffix == ".ply":
-        return write_ply(path, points, fields, binary=binary, overwrite=overwrite)
-    raise FormatError(f"{path}: expected a .pcd or .ply file name")
+    return write_ply(path, points, fields, binary=binary, overwrite=overwrite)
+
+
+def check_point_file_name(path: str | os.PathLike[str]) -> Path:
+    """``path`` as a :class:`~pathlib.Path` after checking that it names a point file this
+    module writes (``.pcd`` or ``.ply``): a check to make before a long computation.
+
+    Raises
+    ------
+    FormatError
+        For any other suffix.
+    """
+    p = Path(path)
+    if p.suffix.lower() not in (".pcd", ".ply"):
+        raise FormatError(f"{p}: expected a .pcd or .ply file name")
+    return p
 
 
 def read_point_file(path: str | os.PathLike[str]) -> tuple[np.ndarray, tuple[str, ...]]:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import FormatError
+from ..errors import FormatError, SettingsError
 
 __all__ = ["POINTFIELD_DTYPES", "CloudLayout", "decode_cloud", "encode_cloud"]
 
@@ -68,7 +68,7 @@ def encode_cloud(points: np.ndarray, names: tuple[str, ...]) -> tuple[CloudLayou
     """
     p = np.asarray(points)
     if p.ndim != 2 or p.shape[1] != len(names):
-        raise ValueError(f"expected points of shape (N, {len(names)}) for fields {names}, "
+        raise SettingsError(f"expected points of shape (N, {len(names)}) for fields {names}, "
                          f"got {p.shape}")
     data = np.ascontiguousarray(p, dtype="<f4").reshape(-1).view(np.uint8)
     n, c = p.shape

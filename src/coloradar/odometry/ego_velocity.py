@@ -33,7 +33,9 @@ The final velocity is the plain (unweighted) least-squares fit on the chosen mot
 residuals are wrapped into ``[−v_max, v_max)`` and the inliers' measurements are unwrapped
 against the model before the least-squares step. Speeds above ``v_max`` then work as long as
 enough static points see a range rate below ``v_max`` to form the minimal sets (points to the
-side of the motion)."""
+side of the motion). Point clouds from :class:`coloradar.dsp.RadarProcessor` carry range rates
+already unwrapped by its Doppler alias search (``doppler_unwrap``), and the wrapping leaves
+those alone (a residual within the threshold wraps to itself)."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FormatError, MissingDataError, OutputExistsError
-from ..formats.atomic import atomic_write_text
+from ..formats.atomic import atomic_write_text, make_output_dir
 from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .metrics import (
@@ -259,7 +259,7 @@ def write_evaluation(ev: Evaluation, folder: str | os.PathLike[str], *, plot: bo
     if existing and not overwrite:
         raise OutputExistsError(f"{folder}: holds {', '.join(existing)} already; pass "
                                 "overwrite=True (--overwrite) to replace them")
-    folder.mkdir(parents=True, exist_ok=True)
+    make_output_dir(folder)
     written = []
     atomic_write_text(folder / names[0], json.dumps(evaluation_dict(ev), indent=2) + "\n")
     atomic_write_text(folder / names[1], format_evaluation(ev))

@@ -27,7 +27,7 @@ from .. import __version__
 from ..calib import RadarCalib
 from ..dsp.points import POINT_SOURCES, default_point_source, radar_point_stream
 from ..errors import ColoradarError, MissingDataError, OutputExistsError
-from ..formats.atomic import atomic_write_text
+from ..formats.atomic import atomic_write_text, make_output_dir
 from ..geometry import Trajectory, trajectory_from_groundtruth, window_indices
 from .dead_reckoning import ORIENTATION_SOURCES, estimate_gyro_bias, radar_inertial_odometry
 from .ego_velocity import EgoVelocityConfig, static_inlier_threshold
@@ -267,7 +267,7 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
         "coloradar_version": __version__,
     }
     comments = [f"run {seq.name}, {radar} radar, source {source}"]
-    folder.mkdir(parents=True, exist_ok=True)
+    make_output_dir(folder)
     write_velocity_table(targets[0], track, comments=comments, overwrite=overwrite)
     write_tum(targets[1], traj, overwrite=overwrite, comments=[
         *comments, f"world_T_base from radar ego-velocity + {orientation} attitude"])

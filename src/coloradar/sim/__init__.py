@@ -20,6 +20,7 @@ from .radar import (
     make_coupling,
     onboard_pointcloud,
     radar_frame,
+    tx_gains,
     visible_targets,
 )
 from .radar_if import apply_channel_errors, slow_times, synthesize_adc
@@ -87,5 +88,6 @@ __all__ = [
     "simulated_calibration",
     "slow_times",
     "synthesize_adc",
+    "tx_gains",
     "visible_targets",
 ]

@@ -10,11 +10,16 @@ Per frame (timestamp = start of the frame's first chirp):
    (:mod:`.scene`, ``P`` the two-way antenna pattern ``cos^pa(az)·cos^pe(el)``) and its
    velocity relative to the radar.
 3. :func:`.radar_if.synthesize_adc` (single precision) forms the IF frame (real TDM timing, free-space
-   ``1/R²``); the cascade's per-channel phase/frequency errors are imposed with
+   ``1/R²``); white thermal noise is added *before* the per-channel errors, as in hardware
+   (receiver noise enters at the LNA, ahead of the receive chain's gain); the cascade's
+   per-channel gain, phase and delay errors are then imposed with
    :func:`.radar_if.apply_channel_errors` (the inverse of the calibration written to
-   ``calib/cascade/phase_frequency_calib.txt``); the static coupling/leakage term (whose range
-   FFT is ``coupling_calib.txt``) and white thermal noise are added; the result is rounded and
-   clipped to int16 when written.
+   ``calib/cascade/phase_frequency_calib.txt``). The transmit part of a channel's gain (TX
+   power) scales the echo but not the receiver noise, so the noise of TX ``t`` enters scaled by
+   ``1/a_t`` (:func:`tx_gains`); after calibration the channels therefore carry unequal noise,
+   as real ones do. The static coupling/leakage term (whose range FFT is
+   ``coupling_calib.txt``) is added last; the result is rounded and clipped to int16 when
+   written.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ __all__ = [
     "make_coupling",
     "onboard_pointcloud",
     "radar_frame",
+    "tx_gains",
     "visible_targets",
 ]
 
@@ -199,18 +205,38 @@ def visible_targets(calib: RadarCalib, model: RadarModel, scatterers: Scatterers
     return RadarTargets(p_k, v_rel, amp, scatterers.ident[idx])
 
 
-def make_channel_errors(calib: RadarCalib, rng: np.random.Generator) -> PhaseFrequencyCalib:
+def make_channel_errors(calib: RadarCalib, rng: np.random.Generator,
+                        gain_spread: float = 7.0) -> PhaseFrequencyCalib:
     """Random per-channel errors of a cascade board, as its calibration file describes them.
 
     Frequencies ≈ 51 ± 0.3 range bins (a corner reflector near 3 m seen with slightly different
-    delays per channel, as in the real file), unit-magnitude random phases; slope and sampling
-    rate are the waveform's.
+    delays per channel, as in the real file) and random phases. Amplitudes are a TX gain times
+    an RX gain times a small residual (log-normal), scaled so that the largest over the
+    smallest is about ``gain_spread`` (the real file's amplitudes, 5.0e3 … 3.4e4, spread 6.8×
+    and are nearly rank one); slope and sampling rate are the waveform's.
     """
     w = calib.waveform
     shape = (w.num_tx, w.num_rx)
     freq = 51.15 + rng.uniform(-0.3, 0.3, shape)
     phase = np.exp(1j * rng.uniform(-np.pi, np.pi, shape))
-    return PhaseFrequencyCalib(np.round(freq, 4), phase, w.slope, w.sample_rate)
+    log_amp = (rng.normal(0.0, 1.0, (w.num_tx, 1)) + 0.8 * rng.normal(0.0, 1.0, (1, w.num_rx))
+               + 0.15 * rng.normal(0.0, 1.0, shape))
+    if gain_spread > 1.0 and np.ptp(log_amp) > 0:
+        log_amp = log_amp * (np.log(gain_spread) / np.ptp(log_amp))
+    amp = 1.0e4 * np.exp(log_amp - log_amp.mean())
+    return PhaseFrequencyCalib(np.round(freq, 4), amp * phase, w.slope, w.sample_rate)
+
+
+def tx_gains(errors: PhaseFrequencyCalib) -> np.ndarray:
+    """Transmit part ``a_t`` of the channel gains ``|P[t,r]/P[0,0]|`` (float64 ``(tx,)``).
+
+    The gains are split as ``a_t·b_r·e_tr`` by averaging their logarithms over RX (geometric
+    mean), normalised so that ``Π a_t = 1``: receiver noise is scaled by ``b_r`` (and the
+    residual) but not by ``a_t``.
+    """
+    log_g = np.log(np.abs(1.0 / errors.relative_phase()))
+    a = log_g.mean(axis=1)
+    return np.exp(a - a.mean())
 
 
 def make_coupling(calib: RadarCalib, model: RadarModel,
@@ -251,13 +277,17 @@ def radar_frame(calib: RadarCalib, model: RadarModel, targets: RadarTargets, *,
     """
     frame = synthesize_adc(calib, targets.position, targets.velocity, targets.amplitude,
                            precision="single")
+    if model.noise_std > 0:
+        # Receiver noise enters before the receive chain's gain, after the TX power.
+        noise = rng.standard_normal((*frame.shape, 2), dtype=np.float32)
+        scale = np.full(frame.shape[0], model.noise_std, dtype=np.float32)
+        if channel_errors is not None:
+            scale = (model.noise_std / tx_gains(channel_errors)).astype(np.float32)
+        frame += scale[:, None, None, None] * noise.view(np.complex64)[..., 0]
     if channel_errors is not None:
         frame = apply_channel_errors(frame, channel_errors)
     if coupling_adc is not None:
         frame += coupling_adc[:, :, None, :]
-    if model.noise_std > 0:
-        noise = rng.standard_normal((*frame.shape, 2), dtype=np.float32)
-        frame += model.noise_std * noise.view(np.complex64)[..., 0]
     return frame
 
 

@@ -58,7 +58,7 @@ from ..calib import (
     preset_radar,
     write_calibration,
 )
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..errors import ColoradarError, FormatError, MissingDataError, OutputExistsError
 from ..formats import (
     atomic_write_text,
     decode_adc,
@@ -72,6 +72,7 @@ from ..formats import (
 )
 from ..formats.atomic import atomic_write_bytes
 from ..formats.layout import COLORADAR, RunLayout, get_layout
+from ..formats.source import read_file_text
 from .imu import ImuModel, simulate_imu
 from .lidar import LidarModel, simulate_scan
 from .radar import (
@@ -411,6 +412,7 @@ def simulate_run(
     duration: float = 10.0,
     seed: int = 0,
     motion: str = "smooth",
+    speed: float | None = None,
     sensors: Sequence[str] | None = None,
     vicon: bool = False,
     heatmaps: bool | None = None,
@@ -438,6 +440,10 @@ def simulate_run(
         Seed of everything that varies between runs (motion perturbations, noise, timing).
     motion
         Motion profile: ``smooth``, ``handheld`` or ``aggressive``.
+    speed
+        Nominal rig speed [m/s] replacing the scene's (None: the scene's, scaled by the
+        profile). Above ~1.76 m/s the cascade's Doppler folds (v_max), above ~2.45 m/s the
+        single chip's.
     sensors
         Subset of :data:`SENSOR_CHOICES` to write; None: every sensor of the layout.
     vicon
@@ -483,6 +489,8 @@ def simulate_run(
     if motion not in MOTION_PROFILES:
         raise ColoradarError(f"unknown motion profile {motion!r}; expected one of "
                              f"{', '.join(MOTION_PROFILES)}")
+    if speed is not None and not (np.isfinite(speed) and 0 <= speed <= 30):
+        raise ColoradarError(f"speed must be in [0, 30] m/s, got {speed}")
     if not 0 < duration <= 3600:
         raise ColoradarError(f"duration must be in (0, 3600] s, got {duration}")
     sc = resolve_scene(scene)
@@ -503,7 +511,7 @@ def simulate_run(
     if partial.exists():
         shutil.rmtree(partial)  # a previous, interrupted simulation of this run
     partial.mkdir(parents=True)
-    traj = make_trajectory(sc.rig_path, motion, [seed, _STREAM_KEY["trajectory"]])
+    traj = make_trajectory(sc.rig_path, motion, [seed, _STREAM_KEY["trajectory"]], speed=speed)
     ctx = _Context(sc, traj, calib, coupling_adc, seed, start_time, partial, progress, has_proc,
                    lay)
     trng = ctx.rng("timing")
@@ -543,7 +551,8 @@ def simulate_run(
         truth.update(_write_slow_streams(ctx, sensors, vicon, times, gt_times))
         counts = _counts(sensors, vicon, times, gt_times, has_proc, lay)
         _write_run_info(ctx, partial, sc, dict(
-            scene=sc.name, duration=duration, seed=seed, motion=motion, sensors=list(sensors),
+            scene=sc.name, duration=duration, seed=seed, motion=motion, speed=speed,
+            sensors=list(sensors),
             vicon=vicon, heatmaps=has_proc, start_time=start_time, name=name,
             board_seed=board_seed, coloradar_version=__version__, counts=counts,
             layout=lay.name), truth)
@@ -686,7 +695,11 @@ def open_simulation(run_path: str | os.PathLike[str]) -> Simulation:
     cfg_path = root / "truth" / "sim_config.json"
     if not cfg_path.is_file():
         raise ColoradarError(f"{root}: not a simulated run (no truth/sim_config.json)")
-    cfg = json.loads(cfg_path.read_text(encoding="utf-8"))
+    try:
+        cfg = json.loads(read_file_text(cfg_path))
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"{cfg_path}: expected the JSON the simulator writes ({exc})") from None
     scene = load_scene(root / "truth" / "scene.json")
-    traj = make_trajectory(scene.rig_path, cfg["motion"], [cfg["seed"], _STREAM_KEY["trajectory"]])
+    traj = make_trajectory(scene.rig_path, cfg["motion"], [cfg["seed"], _STREAM_KEY["trajectory"]],
+                           speed=cfg.get("speed"))
     return Simulation(scene, traj, float(cfg["start_time"]), cfg)

@@ -22,7 +22,7 @@ from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 
 from ..errors import MissingDataError, MissingDependencyError, SettingsError
-from ..formats.atomic import default_file_mode, new_output_path
+from ..formats.atomic import default_file_mode, make_output_dir, new_output_path
 from ._figure import new_figure
 from .scene import (
     REFERENCE_STREAMS,
@@ -132,7 +132,7 @@ def animate_run(seq, out: str | os.PathLike[str], *, start: float = 0.0,
                  label="radar range rate [m/s] (+ receding)", shrink=0.8)
     t_run = _run_start(seq)
     cache: dict = {}
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_output_dir(out.parent)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=f".tmp{suffix}", dir=out.parent)
     os.close(fd)
     try:

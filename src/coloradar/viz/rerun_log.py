@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MissingDependencyError
-from ..formats.atomic import new_output_path
+from ..formats.atomic import make_output_dir, new_output_path
 from ..geometry import sensor_to_base, trajectory_from_groundtruth, window_indices
 from .scene import RADAR_STREAMS, _has, _run_start, _stream, radar_points, radar_source
 
@@ -86,7 +86,7 @@ def log_run_rrd(seq, out: str | os.PathLike[str], *, start: float = 0.0,
         frames += [(float(ts[i]), sensor, name, int(i)) for i in idx]
     frames.sort()
 
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_output_dir(out.parent)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=".tmp.rrd", dir=out.parent)
     os.close(fd)
     rec = rr.RecordingStream("coloradar", recording_id=seq.name)
