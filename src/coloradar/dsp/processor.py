@@ -41,7 +41,7 @@ from .cfar import (
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_mask
-from .heatmap import heatmap_from_elements
+from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
 
@@ -130,6 +130,12 @@ class ProcessingSettings:
         Threads per scipy.fft call. The default 1 is fastest for one frame on few cores (the
         heatmap's FFTs come in cache-sized chunks too small to split); parallelism across
         frames belongs to the batch layer (one process per core).
+    engine
+        ``"auto"`` (numba when installed, else numpy), ``"numba"`` or ``"numpy"``: whether
+        the heatmap's elevation transform, power and Doppler maximum, and the range stage's
+        coupling/DC/calibration/window pass, run as compiled kernels
+        (:mod:`coloradar.dsp.heatmap`, ``pip install coloradar[accel]``); the results agree
+        to float32 rounding.
     """
 
     range_window: WindowName = "hann"
@@ -162,13 +168,14 @@ class ProcessingSettings:
     angle_oversample: int = 2
     capon_loading: float = 0.05
     workers: int = 1
+    engine: str = "auto"
 
     def __post_init__(self) -> None:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
                    "coupling_domain": COUPLING_DOMAINS, "overlap": OVERLAP_MODES,
                    "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
                    "noise_weighting": NOISE_WEIGHTINGS,
-                   "azimuth_sign": (1, -1), "elevation_sign": (1, -1)}
+                   "azimuth_sign": (1, -1), "elevation_sign": (1, -1), "engine": ENGINES}
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise SettingsError(f"{name} = {getattr(self, name)!r}; expected one of "
@@ -290,6 +297,10 @@ class RadarProcessor:
             wd = wd * np.where(np.arange(nc) % 2 == 0, 1.0, -1.0)
         self._mult = (cal[:, :, None, :] * coherent_window(s.range_window, ns)
                       * wd[None, None, :, None]).astype(np.complex64)
+        # The same factors for the compiled range pass: per channel × per chirp.
+        self._gain = (cal * coherent_window(s.range_window, ns)).astype(np.complex64)
+        self._chirp_weight = wd.astype(np.float32)
+        self._engine = resolve_engine(s.engine)
         self._coupling = None
         if s.coupling_subtraction and calib.coupling is not None:
             c = coupling_signal(calib.coupling, ns)
@@ -359,6 +370,8 @@ class RadarProcessor:
         """Calibrated range FFT ``(tx, rx, chirp, range)``; chirps carry the Doppler window and
         the ``(−1)^c`` of the Doppler shift."""
         x = self._check(adc)
+        if self._engine == "numba":
+            return self._range_cube_compiled(x)
         y = x - self._coupling if self._coupling is not None else x.astype(np.complex64)
         if y.dtype != np.complex64:
             y = y.astype(np.complex64)
@@ -367,6 +380,22 @@ class RadarProcessor:
         y *= self._mult
         out = sfft.fft(y, n=self.range_fft_size, axis=-1, workers=self.settings.workers,
                        overwrite_x=True)
+        return out[..., : self.num_range_bins]
+
+    def _range_cube_compiled(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`_range_cube` with coupling, DC removal, calibration and windows in one
+        compiled pass (same result to float32 rounding)."""
+        from ._kernels import prepare_chirps
+        nfft, ns = self.range_fft_size, x.shape[-1]
+        x = np.ascontiguousarray(x, dtype=np.complex64)
+        y = np.empty((*x.shape[:-1], nfft), dtype=np.complex64)
+        if nfft > ns:
+            y[..., ns:] = 0.0
+        coupling = (np.ascontiguousarray(self._coupling[:, :, 0, :]).view(np.float32)
+                    if self._coupling is not None else np.empty((0, 0, 0), dtype=np.float32))
+        prepare_chirps(x.view(np.float32), coupling, self._gain.view(np.float32),
+                       self._chirp_weight, bool(self.settings.dc_removal), y.view(np.float32))
+        out = sfft.fft(y, axis=-1, workers=self.settings.workers, overwrite_x=True)
         return out[..., : self.num_range_bins]
 
     def _doppler(self, rcube: np.ndarray) -> np.ndarray:
@@ -417,9 +446,17 @@ class RadarProcessor:
         return self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap else self._heatmap(rd)
 
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
+        if self.settings.overlap == "first":
+            # the engine reads each element's channel straight from the cube
+            ntx, nrx = rd.shape[:2]
+            first = self.calib.antenna.virtual.first_pair
+            return heatmap_from_elements(rd.reshape(ntx * nrx, *rd.shape[2:]), self.grid,
+                                         self.velocities, workers=self.settings.workers,
+                                         engine=self._engine,
+                                         channels=first[:, 0] * nrx + first[:, 1])
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
-                                     workers=self.settings.workers)
+                                     workers=self.settings.workers, engine=self._engine)
 
     def _heatmap_unwrapped(self, rd: np.ndarray) -> np.ndarray:
         """Heatmap with disambiguated Doppler (``heatmap_unwrap``), through the same kernel.
