@@ -97,12 +97,15 @@ BRUTE = {"evo": _brute_evo_consecutive, "evo_all_pairs": _brute_evo_all_pairs,
 
 @pytest.mark.parametrize("pairing", RPE_PAIRINGS)
 @pytest.mark.parametrize("d", [0.5, 1.0, 2.5])
-def test_rpe_pairs_and_errors_match_a_brute_force_of_the_rule(pairing, d):
+@pytest.mark.parametrize("pairs_from", [None, "reference", "estimate"])
+def test_rpe_pairs_and_errors_match_a_brute_force_of_the_rule(pairing, d, pairs_from):
     ref = _wander()
     est = _noisy(ref)
-    expected = BRUTE[pairing](ref.translations, d)
+    # Whose path picks the pairs: evo's default is the estimate, every_pose's the reference.
+    by = pairs_from or ("reference" if pairing == "every_pose" else "estimate")
+    expected = BRUTE[pairing]((ref if by == "reference" else est).translations, d)
     assert len(expected) > 5
-    (res,) = relative_pose_error(est, ref, [d], pairing=pairing)
+    (res,) = relative_pose_error(est, ref, [d], pairing=pairing, pairs_from=pairs_from)
     assert res.pairing == pairing
     t = ref.timestamps
     got = list(zip(np.searchsorted(t, res.start_times), np.searchsorted(t, res.end_times),
@@ -137,3 +140,15 @@ def test_rpe_pairing_is_checked():
         rpe_pairs(np.arange(5.0), 1.0, "kitti")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="positive"):
         rpe_pairs(np.arange(5.0), 0.0)
+
+
+def test_evaluation_records_and_uses_the_pairing():
+    from coloradar.odometry import evaluate_trajectory
+    from coloradar.odometry.evaluation import evaluation_dict
+
+    ref = _wander()
+    est = _noisy(ref)
+    ev = evaluate_trajectory(est, ref, distances=(1.0,), rpe_pairing="evo")
+    expected = _brute_evo_consecutive(est.translations, 1.0)
+    assert ev.rpe[0].pairs == len(expected) and ev.rpe[0].pairing == "evo"
+    assert evaluation_dict(ev)["info"]["rpe_pairing"] == "evo"

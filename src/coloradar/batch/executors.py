@@ -30,14 +30,16 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 from ..errors import CalibrationWarning, ColoradarError, DataWarning, MissingDependencyError, SettingsError
 
 __all__ = ["DaskExecutor", "Executor", "LocalExecutor", "SerialExecutor", "TaskError",
            "make_executor"]
 
-_ERRORS = ("raise", "return")
+TaskErrors = Literal["raise", "return"]
+"""What a failing task does: raise in the caller, or come back as a :class:`TaskError`."""
+_ERRORS: tuple[TaskErrors, ...] = get_args(TaskErrors)
 
 
 @dataclass(frozen=True)
@@ -60,7 +62,7 @@ class TaskError:
         return cls(type(exc).__name__, str(exc))
 
 
-def _check_errors(errors: str) -> None:
+def _check_errors(errors: TaskErrors) -> None:
     if errors not in _ERRORS:
         raise SettingsError(f"errors must be one of {_ERRORS}, got {errors!r}")
 
@@ -73,7 +75,7 @@ class Executor:
     description: str = "executor"
 
     def imap_unordered(self, fn: Callable[[Any], Any], tasks: Iterable[Any], *,
-                       errors: str = "raise") -> Iterator[tuple[Any, Any]]:
+                       errors: TaskErrors = "raise") -> Iterator[tuple[Any, Any]]:
         """Apply ``fn`` to every task, yielding ``(task, result)`` in completion order.
 
         Parameters
@@ -104,7 +106,8 @@ class SerialExecutor(Executor):
 
     description = "serial (this process)"
 
-    def imap_unordered(self, fn, tasks, *, errors="raise"):
+    def imap_unordered(self, fn: Callable[[Any], Any], tasks: Iterable[Any], *,
+                       errors: TaskErrors = "raise") -> Iterator[tuple[Any, Any]]:
         _check_errors(errors)
         for task in tasks:
             try:
@@ -170,7 +173,8 @@ class LocalExecutor(Executor):
         self._pool = self._new_pool()
         self.restarts += 1
 
-    def imap_unordered(self, fn, tasks, *, errors="raise"):
+    def imap_unordered(self, fn: Callable[[Any], Any], tasks: Iterable[Any], *,
+                       errors: TaskErrors = "raise") -> Iterator[tuple[Any, Any]]:
         _check_errors(errors)
         it = iter(tasks)
         none = object()
@@ -317,7 +321,8 @@ class DaskExecutor(Executor):
     def max_in_flight(self) -> int:
         return self._fixed_in_flight or 2 * self.workers
 
-    def imap_unordered(self, fn, tasks, *, errors="raise"):
+    def imap_unordered(self, fn: Callable[[Any], Any], tasks: Iterable[Any], *,
+                       errors: TaskErrors = "raise") -> Iterator[tuple[Any, Any]]:
         from distributed import as_completed
 
         _check_errors(errors)

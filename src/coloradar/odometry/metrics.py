@@ -18,8 +18,9 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
   ``E = (ref_i⁻¹ ref_j)⁻¹ (est_i⁻¹ est_j)``. Translation error in percent is ``100 · |t_E| / d``
   and rotation error ``angle(E) / d`` in deg/m, averaged over the pairs (the KITTI devkit's
   numbers; it uses d = 100…800 m for cars, 1, 2, 5 m suit a hand-held rig indoors). RPE needs
-  no alignment. The pairs, all measured along the reference's path length ``L``
-  (``pairing``):
+  no alignment. The pairs (``pairing``), chosen by the path length ``L`` along the reference
+  (``every_pose``) or, as evo does unless given ``--pairs_from_reference``, along the estimate
+  (``evo``, ``evo_all_pairs``; ``pairs_from`` overrides):
 
   * ``"every_pose"`` (default): every pose ``i`` starts a pair; ``j`` is the first pose with
     ``L_j − L_i ≥ d`` (KITTI's rule, with a start at every pose instead of every 10th).
@@ -342,7 +343,9 @@ def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_po
 def relative_pose_error(estimate: Trajectory, reference: Trajectory,
                         distances: tuple[float, ...] | list[float] = (1.0, 2.0, 5.0), *,
                         max_gap: float | None = 1.0, pairing: RPEPairing = "every_pose",
-                        tolerance: float = 0.1) -> list[RPEResult]:
+                        tolerance: float = 0.1,
+                        pairs_from: Literal["reference", "estimate"] | None = None
+                        ) -> list[RPEResult]:
     """RPE over fixed travelled distances (KITTI / evo convention, see the module docstring).
 
     Parameters
@@ -358,6 +361,10 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
         ``"evo_all_pairs"`` (``evo_rpe -d D -u m --all_pairs``); see :func:`rpe_pairs`.
     tolerance
         Relative path-length tolerance of ``"evo_all_pairs"`` (evo's default 0.1).
+    pairs_from
+        Whose path length picks the pairs; None: the reference for ``"every_pose"``, the
+        estimate for the evo pairings (evo's default; ``"reference"`` is evo's
+        ``--pairs_from_reference``).
 
     Returns
     -------
@@ -365,7 +372,11 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
         One per distance (with no pairs where the run is shorter than it).
     """
     est, ref = associate_trajectories(estimate, reference, max_gap)
-    dist = path_length(ref.translations)
+    if pairs_from is None:
+        pairs_from = "reference" if pairing == "every_pose" else "estimate"
+    if pairs_from not in ("reference", "estimate"):
+        raise SettingsError(f"pairs_from must be 'reference' or 'estimate', got {pairs_from!r}")
+    dist = path_length((ref if pairs_from == "reference" else est).translations)
     out = []
     for d in distances:
         i, j = rpe_pairs(dist, d, pairing, tolerance=tolerance)
