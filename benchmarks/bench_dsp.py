@@ -51,7 +51,9 @@ from coloradar.dsp import RadarProcessor, coupling_signal, phase_frequency_facto
 from coloradar.dsp.heatmap import CHUNK_SIZE, available_engines, elevation_steering
 from coloradar.sim import apply_channel_errors, synthesize_adc
 
-REAL_CALIB = Path(__file__).resolve().parents[1].parent / "shared/reference/coloradar_calib"
+REAL_CALIB = Path(os.environ.get(
+    "COLORADAR_REFERENCE_CALIB",
+    Path(__file__).resolve().parents[1].parent / "shared/reference/coloradar_calib"))
 CPU_CLOCK = False
 
 

@@ -5,6 +5,7 @@ The content is random but known, so reads can be compared with what was written.
 
 from __future__ import annotations
 
+import os
 import zipfile
 from pathlib import Path
 
@@ -13,7 +14,11 @@ import numpy as np
 from coloradar import formats as fm
 from coloradar.calib import Calibration, preset_calibration, write_calibration
 
-REFERENCE_CALIB = Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "coloradar_calib"
+# The real calibration of the release (read, never copied): beside the checkout as CI lays it out,
+# or wherever COLORADAR_REFERENCE_CALIB points (worktrees, other machines).
+REFERENCE_CALIB = Path(os.environ.get(
+    "COLORADAR_REFERENCE_CALIB",
+    Path(__file__).resolve().parents[1].parent / "shared" / "reference" / "coloradar_calib"))
 
 
 def write_run(root: Path, name: str = "12_21_2020_ec_hallways_run0", *, calib: Calibration | None = None,

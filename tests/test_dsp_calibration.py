@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from _synth import REFERENCE_CALIB
 from coloradar.calib import CouplingCalib, PhaseFrequencyCalib, load_calibration, preset_radar
 from coloradar.dsp import (
     RadarProcessor,
@@ -18,7 +18,7 @@ from coloradar.dsp import (
 )
 from coloradar.sim import apply_channel_errors, synthesize_adc
 
-REAL_CALIB = Path(__file__).parents[1].parent / "shared/reference/coloradar_calib"
+REAL_CALIB = REFERENCE_CALIB
 
 
 def _errors(calib, seed, slope=None, fs=None):

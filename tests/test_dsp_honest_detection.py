@@ -14,10 +14,8 @@ gain over ``Ns`` samples and ``Nc`` loops give ``|a|²·Ns·Nc / (2σ²·1.5²)`
 
 from __future__ import annotations
 
-import os
 import warnings
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,7 +25,7 @@ from coloradar.calib import load_calibration, preset_radar
 from coloradar.dsp import RadarProcessor
 from coloradar.sim import apply_channel_errors, make_channel_errors, synthesize_adc
 
-REFERENCE = Path(os.environ.get("COLORADAR_REFERENCE_CALIB", REFERENCE_CALIB))
+REFERENCE = REFERENCE_CALIB
 
 
 def radar(name: str):

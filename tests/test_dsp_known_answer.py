@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from _synth import REFERENCE_CALIB
 from coloradar.calib import PhaseFrequencyCalib, load_calibration, preset_radar
 from coloradar.dsp import RadarProcessor, coupling_signal
 from coloradar.errors import CalibrationWarning
@@ -143,7 +143,7 @@ def test_overlap_average_and_first_agree_on_a_point_target(radars):
     assert b[(*ib, 0)] == pytest.approx(a[(*ia, 0)], rel=0.05)
 
 
-REAL_CALIB = Path(__file__).parents[1].parent / "shared/reference/coloradar_calib"
+REAL_CALIB = REFERENCE_CALIB
 
 
 @pytest.mark.parametrize("name", ["cascade", "single_chip"])

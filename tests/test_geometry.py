@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from _synth import REFERENCE_CALIB
 from coloradar import DataWarning, MissingDataError, load_calibration
 from coloradar.calib import PRESET_TRANSFORMS
 from coloradar.geometry import (
@@ -27,7 +27,7 @@ from coloradar.geometry import (
     world_T_sensor,
 )
 
-CALIB_DIR = Path(__file__).parents[1].parent / "shared/reference/coloradar_calib"
+CALIB_DIR = REFERENCE_CALIB
 
 
 def _homog(points: np.ndarray) -> np.ndarray:

@@ -7,12 +7,12 @@ inliers, scipy's Kabsch solver, loops over pose pairs, closed-form motions.
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from _synth import REFERENCE_CALIB
 from coloradar import ColoradarError, FormatError, OutputExistsError
 from coloradar.calib import preset_calibration
 from coloradar.geometry import SE3, Trajectory, sensor_to_base
@@ -392,7 +392,7 @@ def test_settings_for_the_real_radars():
     from coloradar import load_calibration
     from coloradar.odometry import ego_velocity_config
 
-    calib_dir = Path(__file__).parents[1].parent / "shared/reference/coloradar_calib"
+    calib_dir = REFERENCE_CALIB
     if not calib_dir.is_dir():
         pytest.skip(f"real calibration not found at {calib_dir}")
     with warnings.catch_warnings():
