@@ -190,10 +190,10 @@ def test_ego_velocity_report_for_the_demo(long_run):
 
 @pytest.fixture(scope="module")
 def fast_cascade_run(tmp_path_factory):
-    """2 s of the corridor at a nominal 4 m/s: the rig's speed climbs from 0.9 to 3.3 m/s,
-    7 of 10 cascade frames beyond v_max = 1.76 m/s (simulated with channel gain mismatch and
+    """2 s of the corridor at a nominal 4.5 m/s: the rig's speed climbs from 1.0 to 3.66 m/s
+    (past 2 v_max = 3.52 m/s, the issue's figure), most cascade frames beyond v_max = 1.76 m/s (simulated with channel gain mismatch and
     receiver noise before the gains)."""
-    res = _simulate(tmp_path_factory.mktemp("simfast"), duration=2.0, seed=5, speed=4.0,
+    res = _simulate(tmp_path_factory.mktemp("simfast"), duration=2.0, seed=5, speed=4.5,
                     sensors=("cascade", "groundtruth"))
     return res.run_path
 
@@ -204,7 +204,7 @@ def test_ego_velocity_beyond_vmax_uses_unwrapped_range_rates(fast_cascade_run):
     v_true = truth.radar_velocity("cascade")
     vmax = seq.calib.cascade.waveform.max_velocity
     speed = np.linalg.norm(v_true, axis=1)
-    assert (speed > vmax).sum() >= 5 and speed.max() > 1.8 * vmax
+    assert (speed > vmax).sum() >= 5 and speed.max() > 2.0 * vmax
 
     def errors(processing=None, **cfg):
         config = ego_velocity_config(seq.calib.cascade, **cfg)
@@ -213,7 +213,7 @@ def test_ego_velocity_beyond_vmax_uses_unwrapped_range_rates(fast_cascade_run):
         return track.velocity - v_true
 
     e = errors()
-    # The done-when figure: 3D RMSE within 0.05 m/s at up to 3.3 m/s (1.9 v_max), v_z
+    # The done-when figure: 3D RMSE within 0.05 m/s at up to 3.66 m/s (2.1 v_max), v_z
     # included (observed only through the cascade's coarse elevation).
     assert np.sqrt(np.mean(np.sum(e**2, axis=1))) <= 0.05, e
     assert np.sqrt(np.mean(np.sum(e[:, :2] ** 2, axis=1))) <= 0.03, e
@@ -221,7 +221,7 @@ def test_ego_velocity_beyond_vmax_uses_unwrapped_range_rates(fast_cascade_run):
     # range rates of extended surfaces are pulled off their direction (docs/dsp.md).
     e_power = errors({"beam_doppler": False})
     assert np.sqrt(np.mean(np.sum(e_power**2, axis=1))) > np.sqrt(np.mean(np.sum(e**2, axis=1)))
-    # A ground rig estimated planar (v_z = 0): 3D RMSE within 0.05 m/s at up to 3.3 m/s.
+    # A ground rig estimated planar (v_z = 0): 3D RMSE within 0.05 m/s at up to 3.66 m/s.
     e = errors(planar=True)
     assert np.sqrt(np.mean(np.sum(e**2, axis=1))) <= 0.05, e
     # The chain without the Doppler search gets angles (and so velocities) wrong.
