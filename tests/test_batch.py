@@ -298,6 +298,8 @@ def test_settings_comparison_and_progress_line():
     older = {k: v for k, v in settings_record(None).items() if k != "capon_loading"}
     assert settings_differences(older, settings_record(None)) == []   # a new default setting
     assert "workers" not in rec                                       # speed, not output
+    numpy_engine = settings_record(ProcessingSettings(engine="numpy"))
+    assert settings_differences(numpy_engine, settings_record(None)) == []   # nor engine
 
     class Log(list):
         def write(self, s):

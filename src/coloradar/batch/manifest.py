@@ -60,8 +60,9 @@ __all__ = [
 MANIFEST = "process_manifest.json"
 LOCK = ".process.lock"
 FORMAT = "coloradar-process-manifest/1"
-# Settings that change how fast, not what, is computed.
-_NOT_OUTPUT = ("workers",)
+# Settings that change how fast, not what, is computed (the heatmap engines agree within float32
+# rounding: tests/test_dsp_heatmap.py), so switching them must not refuse a resume.
+_NOT_OUTPUT = ("workers", "engine")
 
 
 def calibration_fingerprint(calib: RadarCalib) -> str:
