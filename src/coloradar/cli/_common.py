@@ -18,3 +18,13 @@ def new_output_file(out: str, overwrite: bool) -> Path:
     """``out`` as a path, refusing an existing file unless ``overwrite`` (checked before any
     input is read, so that a long command fails at once)."""
     return new_output_path(out, overwrite)
+
+
+def processing_setting(text: str) -> tuple[str, object]:
+    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`."""
+    from ..dsp import ProcessingSettings  # dsp is heavy: only for the commands that parse it
+
+    try:
+        return ProcessingSettings.parse_setting(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None

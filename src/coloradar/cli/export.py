@@ -7,7 +7,7 @@ import argparse
 from ..dataset import open_sequence
 from ..interop.ros import DEFAULT_TOPICS, GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, ROS_FORMATS, export_bag
 from ..progress import Progress
-from ._common import new_output_file
+from ._common import new_output_file, processing_setting
 
 
 def _topic(text: str) -> tuple[str, str]:
@@ -16,15 +16,6 @@ def _topic(text: str) -> tuple[str, str]:
         raise argparse.ArgumentTypeError(
             f"expected STREAM=/topic with STREAM one of {', '.join(DEFAULT_TOPICS)}, got {text!r}")
     return stream, topic
-
-
-def _setting(text: str) -> tuple[str, object]:
-    from ..dsp import ProcessingSettings
-
-    try:
-        return ProcessingSettings.parse_setting(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -49,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="radar points from the run's own point clouds (shipped), computed from "
                         "ADC frames or from heatmaps; auto (default): shipped, else adc, else "
                         "heatmaps")
-    p.add_argument("--set", dest="settings", type=_setting, action="append", default=[],
+    p.add_argument("--set", dest="settings", type=processing_setting, action="append", default=[],
                    metavar="NAME=VALUE", help="a coloradar.dsp.ProcessingSettings field for "
                                           "points computed from ADC (repeatable)")
     p.add_argument("--groundtruth-msg", choices=GROUNDTRUTH_MSGS, default="odometry",

@@ -11,6 +11,7 @@ from ..batch.driver import DEFAULT_CHUNK_SIZE, process
 from ..batch.layout import PRODUCTS
 from ..dsp import ProcessingSettings
 from ..errors import ColoradarError
+from ._common import processing_setting
 
 
 def _frames(text: str) -> slice:
@@ -52,14 +53,6 @@ def _positive(text: str) -> int:
     return n
 
 
-def _setting(text: str) -> tuple[str, object]:
-    """``--set NAME=VALUE``, parsed by :meth:`ProcessingSettings.parse_setting`."""
-    try:
-        return ProcessingSettings.parse_setting(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "process", help="process raw ADC frames (a run or a whole dataset) into heatmaps and "
@@ -87,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=_frames, metavar="START:STOP",
                    help="positions in each ADC stream to process, Python slice style "
                         "(default: all)")
-    p.add_argument("--set", dest="settings", type=_setting, action="append", default=[],
+    p.add_argument("--set", dest="settings", type=processing_setting, action="append", default=[],
                    metavar="NAME=VALUE",
                    help="a processing setting (coloradar.dsp.ProcessingSettings), e.g. "
                         "--set angle_method=capon --set pfa=1e-5; repeatable")

@@ -29,6 +29,16 @@ def _not_regular(path: Path, mode: int) -> ReadError:
     return ReadError(f"{path}: expected a regular file, found {kind}")
 
 
+def _stat(p: Path) -> os.stat_result:
+    """``os.stat`` with its failures as named coloradar errors."""
+    try:
+        return os.stat(p)
+    except FileNotFoundError:
+        raise MissingDataError(f"{p}: file not found") from None
+    except OSError as exc:
+        raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+
+
 def check_regular_file(path: str | os.PathLike[str]) -> int:
     """The size of ``path`` in bytes, after checking that it is a regular file.
 
@@ -41,12 +51,7 @@ def check_regular_file(path: str | os.PathLike[str]) -> int:
         examined.
     """
     p = Path(path)
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        raise MissingDataError(f"{p}: file not found") from None
-    except OSError as exc:
-        raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    st = _stat(p)
     if not stat.S_ISREG(st.st_mode):
         raise _not_regular(p, st.st_mode)
     return st.st_size
@@ -175,13 +180,7 @@ class FolderSource(Source):
         return check_regular_file(self._p(rel))
 
     def version_key(self, rel: str) -> str:
-        p = self._p(rel)
-        try:
-            st = os.stat(p)
-        except FileNotFoundError:
-            raise MissingDataError(f"{p}: file not found") from None
-        except OSError as exc:
-            raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+        st = _stat(self._p(rel))
         return f"{st.st_size}:{st.st_mtime_ns}"
 
     def describe(self, rel: str) -> str:
