@@ -134,6 +134,20 @@ def test_count_mismatch_warns_and_exposes_only_timestamped_frames(tmp_path):
     assert "3 timestamps but 4 frame files" in out
 
 
+@pytest.mark.parametrize("base", [0, 1])
+def test_first_frame_file_missing_keeps_every_time(tmp_path, base):
+    # A run whose first frame file is lost: file k must keep timestamp k, not take k-1's.
+    truth = write_run(tmp_path, RUN, n_single=5, base=base)
+    data = tmp_path / RUN / "single_chip" / "adc_samples" / "data"
+    (data / f"frame_{base}.bin").unlink()
+    ts, arrays = truth["single_chip/frame"]
+    with pytest.warns(cr.DataWarning, match="1 timestamps have no file"):
+        st = cr.open_sequence(tmp_path / RUN).single_chip.adc
+    assert st.frame_ids.tolist() == [base + i for i in range(1, 5)]
+    np.testing.assert_array_equal(st.timestamps, ts[1:])
+    np.testing.assert_array_equal(st[0], arrays[1])
+
+
 def test_missing_sensor_and_missing_timestamps_are_clear_errors(tmp_path):
     write_run(tmp_path, RUN)
     shutil.rmtree(tmp_path / RUN / "lidar")

@@ -157,8 +157,8 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
     ``<folder>/<timestamps>``.
 
     Frame numbers may start at 0 (original release) or 1 (derived release, ColoRadar+). The
-    ``i``-th timestamp belongs to the file numbered ``base + i``, ``base`` being the number of
-    the first file when it is 0 or 1, else the layout's ``first_frame``. Timestamps without a
+    ``i``-th timestamp belongs to the file numbered ``base + i``, ``base`` being 0 or 1, whichever
+    pairs more files with a timestamp (the layout's ``first_frame`` on a tie). Timestamps without a
     file and files without a timestamp are left out with a :class:`DataWarning` (and noted in
     ``issues``).
     """
@@ -171,7 +171,11 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
         if m and m["prefix"] == prefix:
             ids.append(int(m["num"]))
     ids_arr = np.array(sorted(ids), dtype=np.int64)
-    base = int(ids_arr[0]) if ids_arr.size and ids_arr[0] in (0, 1) else first_frame
+    # Releases number frames from 0 or from 1 and nothing in a run says which: take the base
+    # that pairs the most files with a timestamp, and the layout's own on a tie (a 0-based run
+    # whose frame_0 is missing must not shift every time by one frame).
+    matches = {b: int(np.isin(b + np.arange(ts.size), ids_arr).sum()) for b in (0, 1)}
+    base = first_frame if matches[0] == matches[1] else max(matches, key=matches.__getitem__)
     wanted = base + np.arange(ts.size, dtype=np.int64)
     has = np.isin(wanted, ids_arr)
     issues = []
