@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from coloradar import FormatError, MissingDataError, OutputExistsError, open_sequence
+from coloradar import CalibrationWarning, FormatError, MissingDataError, OutputExistsError, open_sequence
 from coloradar.cli.main import main
 from coloradar.interop import decode_cloud, export_bag, import_bag, ns_to_times, times_to_ns
 from coloradar.interop.pointcloud2 import CloudLayout
@@ -243,9 +243,18 @@ def test_import_foreign_bag_with_topic_map_and_tf_chain(tmp_path):
         import_bag(path, tmp_path / "ds2", topics={"/nope": "imu"})
     with pytest.raises(OutputExistsError):
         import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds"})
-    imp2 = import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds"},
-                      overwrite=True)
+    with_tf = {"/radar/detections": "single_chip/pointclouds", "/tf_static": "tf_static"}
+    imp2 = import_bag(path, tmp_path / "ds", topics=with_tf, base_frame="base_link", overwrite=True)
     assert not imp2.calib_written                              # the existing calib is kept
+    assert imp2.extrinsics_not_applied == []                   # and agrees with the bag
+    # A bag whose extrinsics differ from the kept calib: said, never silently dropped.
+    tf_file = tmp_path / "ds" / "calib" / "transforms" / "base_to_single_chip.txt"
+    xyz, quat = tf_file.read_text().splitlines()[:2]
+    z = float(xyz.split()[2]) + 0.25
+    tf_file.write_text(" ".join([*xyz.split()[:2], repr(z)]) + "\n" + quat + "\n")
+    with pytest.warns(CalibrationWarning, match="single_chip"):
+        imp3 = import_bag(path, tmp_path / "ds", topics=with_tf, base_frame="base_link", overwrite=True)
+    assert imp3.extrinsics_not_applied == ["single_chip"]
 
 
 def test_outputs_are_never_overwritten_unless_asked(run, tmp_path):

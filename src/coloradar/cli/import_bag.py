@@ -57,6 +57,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {stream:<24} {n:>7}  from {res.topics[stream]}")
     print(f"  calib: {res.calib_path} ({'written' if res.calib_written else 'kept'}; extrinsics "
           f"from /tf_static: {', '.join(res.extrinsics) or 'none'})")
+    if res.extrinsics_not_applied:
+        print(f"  NOT applied (the kept calib differs): bag extrinsics of "
+              f"{', '.join(res.extrinsics_not_applied)}")
     for topic, mtype in res.ignored.items():
         print(f"  ignored {topic} ({mtype})")
     return 0

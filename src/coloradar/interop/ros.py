@@ -50,6 +50,7 @@ from scipy.spatial.transform import Rotation
 from ..calib import Calibration, Extrinsic, load_calibration, write_calibration
 from ..dataset import Sequence
 from ..errors import (
+    CalibrationWarning,
     ColoradarError,
     DataWarning,
     FormatError,
@@ -597,6 +598,9 @@ class ImportResult:
         Stream -> topic it came from.
     extrinsics
         Sensors whose ``base_T_sensor`` came from the bag's ``/tf_static``.
+    extrinsics_not_applied
+        Sensors whose ``/tf_static`` extrinsic differs from the kept calibration's (a
+        :class:`CalibrationWarning` says so): the imported run is read with the kept one.
     ignored
         Topics of the bag that no stream took, with their message type.
     seconds
@@ -609,6 +613,7 @@ class ImportResult:
     counts: dict[str, int] = field(default_factory=dict)
     topics: dict[str, str] = field(default_factory=dict)
     extrinsics: list[str] = field(default_factory=list)
+    extrinsics_not_applied: list[str] = field(default_factory=list)
     ignored: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
 
@@ -886,6 +891,11 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
             result.calib_written = True
         elif found:
             result.calib_path = calib_dir if calib_dir.exists() else root / "calib.zip"
+            result.extrinsics_not_applied = _differing_extrinsics(result.calib_path, found)
+            if result.extrinsics_not_applied:
+                warnings.warn(f"{result.calib_path} is kept, so the bag's /tf_static extrinsics of "
+                              f"{', '.join(result.extrinsics_not_applied)} (which differ from it) are "
+                              f"not applied to {final}", CalibrationWarning, stacklevel=2)
         if final.exists():
             shutil.rmtree(final)
         os.replace(partial, final)
@@ -921,3 +931,11 @@ def iter_topics(bag: str | os.PathLike[str]) -> Iterator[tuple[str, str, int]]:
         for topic, info in sorted(reader.topics.items()):
             yield topic, str(info.msgtype), int(info.msgcount)
 
+
+def _differing_extrinsics(calib_path: Path, found: Mapping[str, Extrinsic]) -> list[str]:
+    """Sensors of ``found`` whose pose differs (beyond 1e-9) from the calibration at ``calib_path``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")       # its known unit defects do not matter here
+        kept = load_calibration(calib_path).transforms
+    return sorted(name for name, ext in found.items()
+                  if name not in kept or not np.allclose(kept[name].matrix(), ext.matrix(), atol=1e-9))
