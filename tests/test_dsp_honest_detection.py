@@ -48,8 +48,10 @@ def amplitude_for(calib, snr_db: float, sigma: float) -> float:
 
 
 def noise_frame(calib, g: np.random.Generator, where: str) -> np.ndarray:
-    """Unit complex noise; ``where``: "receiver" = before the channel gains (hardware),
-    "adc" = after them (equal in raw ADC counts, unequal once calibrated)."""
+    """Unit complex noise; ``where``: "receiver" = before every channel gain (equal once
+    calibrated), "adc" = after them (equal in raw ADC counts, unequal once calibrated). Hardware
+    lies between the two: its noise enters before the receive gain but after the transmit one
+    (the simulator's model, tests/test_sim_models.py)."""
     n = g.standard_normal((*calib.frame_shape, 2), dtype=np.float32).view(np.complex64)[..., 0]
     if where == "receiver" and calib.phase_frequency is not None:
         # apply_channel_errors(n, errors) is n times each channel's gain and a unit-modulus
@@ -170,6 +172,10 @@ def test_slow_targets_are_left_alone_and_the_bound_is_honoured():
     det = proc.detect(adc)
     assert len(det) >= 1
     assert np.all(np.abs(det.range_rate) <= 1.5 * w.max_velocity + 1e-9)
+    # the only hypothesis within the bound is the folded one: 1.8 v_max - 2 v_max
+    k = int(np.argmax(det.power))
+    bin_width = proc.velocities[1] - proc.velocities[0]
+    assert abs(det.range_rate[k] - (1.8 - 2.0) * w.max_velocity) <= 1.5 * bin_width, det.range_rate
 
 
 # -------------------------------------------------------------------------- sidelobes

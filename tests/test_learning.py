@@ -58,8 +58,10 @@ def test_samples_are_synchronised(root):
         run_path = ds.path(s["run"])
         if s["run"] not in cache:
             lid_t = parse_timestamps((run_path / "lidar" / "timestamps.txt").read_text())
-            cache[s["run"]] = (*_gt(run_path), lid_t)
-        t_gt, p_gt, lid_t = cache[s["run"]]
+            pc_t = parse_timestamps(
+                (run_path / "single_chip" / "pointclouds" / "timestamps.txt").read_text())
+            cache[s["run"]] = (*_gt(run_path), lid_t, pc_t)
+        t_gt, p_gt, lid_t, pc_t = cache[s["run"]]
         t = s["radar_time"]
         # the pose is the ground truth at the radar time, from knots one ground-truth period apart
         want, knots = _pose_at(t_gt, p_gt, t)
@@ -77,6 +79,8 @@ def test_samples_are_synchronised(root):
         # heatmap and points of the same frame
         assert s["heatmap"].shape == (*calib.single_chip.heatmap_shape, 2)
         assert s["points"].dtype == np.float32 and s["points"].shape[1] == 5
+        # the points are the shipped cloud nearest the heatmap's time (same radar frame)
+        assert s["points_time"] == pc_t[int(np.argmin(np.abs(pc_t - t)))]
         assert abs(s["points_time"] - t) <= 0.05
     assert np.array_equal(view.radar_times(), [view[i]["radar_time"] for i in range(len(view))])
 
