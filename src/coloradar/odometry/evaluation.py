@@ -4,10 +4,11 @@
 folder written by :func:`~coloradar.odometry.run_odometry` (or any TUM trajectory of the rig's
 base frame), opens the run named in ``odometry.json`` (or the one given), and computes the
 ego-velocity error (against the ground-truth velocity of the radar origin in the radar frame,
-:func:`~coloradar.geometry.rig_velocity`), the ATE after alignment, and the RPE over fixed
-distances (:mod:`.metrics`). :func:`write_evaluation` writes ``evaluation.json``,
-``evaluation.txt`` (the printed table), ``groundtruth.txt`` (the reference in TUM format, for
-``evo``) and, with matplotlib installed, ``evaluation.png``.
+:func:`~coloradar.geometry.rig_velocity`), the ATE after alignment, the position error at the
+end, the RPE over fixed distances and the KITTI-style drift (:mod:`.metrics`).
+:func:`write_evaluation` writes ``evaluation.json``, ``evaluation.txt`` (the printed table),
+``groundtruth.txt`` (the ground truth interpolated at the estimate's timestamps, TUM, so that
+``evo`` associates every pose) and, with matplotlib installed, ``evaluation.png``.
 """
 
 from __future__ import annotations
@@ -24,13 +25,18 @@ from ..formats.atomic import atomic_write_text, make_output_dir
 from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .metrics import (
+    DRIFT_LENGTHS,
     Align,
     ATEResult,
+    DriftResult,
+    FinalError,
     RPEPairing,
     RPEResult,
     VelocityErrors,
     absolute_trajectory_error,
+    final_position_error,
     relative_pose_error,
+    trajectory_drift,
     velocity_errors,
 )
 from .pipeline import INFO_FILE, TRAJECTORY_FILE, VELOCITY_FILE
@@ -68,6 +74,11 @@ class Evaluation:
         The ego-velocity track, if any.
     info
         What was evaluated (run, radar, source, alignment…), JSON-compatible.
+    drift
+        KITTI-style drift over :data:`~coloradar.odometry.metrics.DRIFT_LENGTHS` (or the
+        lengths asked for).
+    final
+        Position error at the end, from the same start (``origin`` alignment).
     """
 
     estimate: Trajectory
@@ -77,14 +88,17 @@ class Evaluation:
     velocity: VelocityErrors | None = None
     track: EgoVelocityTrack | None = None
     info: dict = field(default_factory=dict)
+    drift: DriftResult | None = None
+    final: FinalError | None = None
 
 
 def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
                         track: EgoVelocityTrack | None = None, calib=None,
                         align: Align = "se3", distances: tuple[float, ...] = (1.0, 2.0, 5.0),
                         max_gap: float | None = 1.0, info: dict | None = None,
-                        rpe_pairing: RPEPairing = "every_pose") -> Evaluation:
-    """ATE, RPE and (with ``track`` and ``calib``) ego-velocity errors of an estimate.
+                        rpe_pairing: RPEPairing = "every_pose",
+                        drift_lengths: tuple[float, ...] = DRIFT_LENGTHS) -> Evaluation:
+    """ATE, final error, RPE, drift and (with ``track`` and ``calib``) ego-velocity errors.
 
     Parameters
     ----------
@@ -100,18 +114,24 @@ def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
     rpe_pairing
         The RPE's pose pairs (``pairing`` of :func:`~coloradar.odometry.relative_pose_error`;
         ``"evo"`` gives the pairs of ``evo_rpe -d D -u m``).
+    drift_lengths
+        Segment lengths [m] of the KITTI-style drift
+        (:func:`~coloradar.odometry.metrics.trajectory_drift`).
     info
         Extra fields for :attr:`Evaluation.info`.
     """
     ate = absolute_trajectory_error(estimate, reference, align=align, max_gap=max_gap)
+    final = final_position_error(estimate, reference, max_gap=max_gap)
     rpe = relative_pose_error(estimate, reference, distances, max_gap=max_gap,
                               pairing=rpe_pairing)
+    drift = trajectory_drift(estimate, reference, drift_lengths, max_gap=max_gap)
     vel = None
     if track is not None and calib is not None:
         vel = velocity_errors(track, reference, calib)
     meta = {"align": align, "distances": [float(d) for d in distances],
-            "rpe_pairing": rpe_pairing, **(info or {})}
-    return Evaluation(estimate, reference, ate, rpe, vel, track, meta)
+            "rpe_pairing": rpe_pairing, "drift_lengths": [float(d) for d in drift_lengths],
+            **(info or {})}
+    return Evaluation(estimate, reference, ate, rpe, vel, track, meta, drift, final)
 
 
 def _calib_for(info: dict, calib):
@@ -129,7 +149,8 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
                       *, calib=None, align: Align = "se3",
                       distances: tuple[float, ...] = (1.0, 2.0, 5.0),
                       max_gap: float | None = 1.0,
-                      rpe_pairing: RPEPairing = "every_pose") -> Evaluation:
+                      rpe_pairing: RPEPairing = "every_pose",
+                      drift_lengths: tuple[float, ...] = DRIFT_LENGTHS) -> Evaluation:
     """Evaluate an odometry output folder against its run's ground truth.
 
     Parameters
@@ -141,7 +162,7 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
     calib
         Calibration (object or path); default: the one the odometry used, else the one found
         beside the run.
-    align, distances, max_gap, rpe_pairing
+    align, distances, max_gap, rpe_pairing, drift_lengths
         See :func:`evaluate_trajectory`.
 
     Returns
@@ -180,7 +201,7 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
     meta.update(run=str(run), run_name=seq.name, folder=str(folder))
     return evaluate_trajectory(estimate, reference, track=track, calib=seq.calib, align=align,
                                distances=distances, max_gap=max_gap, info=meta,
-                               rpe_pairing=rpe_pairing)
+                               rpe_pairing=rpe_pairing, drift_lengths=drift_lengths)
 
 
 def _f(x: float) -> float | None:
@@ -201,6 +222,13 @@ def evaluation_dict(ev: Evaluation) -> dict:
                    "rotation_deg_per_m": _f(r.rotation_deg_per_m),
                    "translation_rmse_m": _f(r.translation_rmse),
                    "rotation_rmse_deg": _f(r.rotation_rmse)} for r in ev.rpe]
+    if ev.final is not None:
+        out["final_error"] = {"error_m": _f(ev.final.error), "percent_of_path": _f(ev.final.percent),
+                              "path_length_m": _f(ev.final.path_length)}
+    if ev.drift is not None:
+        out["drift"] = {"lengths_m": list(ev.drift.lengths), "segments": ev.drift.pairs,
+                        "translation_percent": _f(ev.drift.translation_percent),
+                        "rotation_deg_per_m": _f(ev.drift.rotation_deg_per_m)}
     if ev.velocity is not None:
         v = ev.velocity
         out["ego_velocity"] = {
@@ -234,6 +262,14 @@ def format_evaluation(ev: Evaluation) -> str:
                  f"(mean {a.mean:.3f}, median {a.median:.3f}, max {a.max:.3f} m; "
                  f"{a.errors.size} poses)"))
     rows.append(("ATE rotation RMSE", f"{a.rotation_rmse:.2f} deg"))
+    if ev.final is not None:
+        rows.append(("final position error", f"{ev.final.error:.3f} m = {ev.final.percent:.2f} % "
+                     "of the distance (first poses coincide)"))
+    if ev.drift is not None:
+        d = ev.drift
+        lengths = ", ".join(f"{x:g}" for x in d.lengths)
+        rows.append(("drift (KITTI-style)", f"{d.translation_percent:.2f} %, "
+                     f"{d.rotation_deg_per_m:.3f} deg/m over {d.pairs} segments of {lengths} m"))
     w = max(len(r[0]) for r in rows)
     lines += [f"{k:<{w}}  {val}" for k, val in rows]
     lines.append("")
@@ -264,9 +300,14 @@ def write_evaluation(ev: Evaluation, folder: str | os.PathLike[str], *, plot: bo
     atomic_write_text(folder / names[0], json.dumps(evaluation_dict(ev), indent=2) + "\n")
     atomic_write_text(folder / names[1], format_evaluation(ev))
     written += [folder / names[0], folder / names[1]]
-    gt = ev.reference
-    written.append(write_tum(folder / names[2], gt, overwrite=True,
-                             comments=[f"ground truth world_T_base of {ev.info.get('run_name', 'the run')}"]))
+    # The ground truth at the estimate's own timestamps (the poses the ATE used): evo
+    # associates poses by timestamp, and the raw 10 Hz ground truth shares none with a radar
+    # frame's time.
+    gt = ev.ate.reference
+    run_name = ev.info.get("run_name", "the run")
+    written.append(write_tum(folder / names[2], gt, overwrite=True, comments=[
+        f"ground truth world_T_base of {run_name}, interpolated (linear, SLERP) at the "
+        "estimate's timestamps"]))
     if plot:
         try:
             from .plot import plot_evaluation

@@ -25,10 +25,9 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
   * ``"every_pose"`` (default): every pose ``i`` starts a pair; ``j`` is the first pose with
     ``L_j − L_i ≥ d`` (KITTI's rule, with a start at every pose instead of every 10th).
   * ``"evo"``: what ``evo_rpe -d D -u m`` uses: consecutive, non-overlapping segments. The
-    walk starts at the first pose; each segment ends at the first pose whose path length from
-    the previous segment end reaches ``d``. The segment ends are the pair members, so the
-    first pair starts at the *first segment end*, not at pose 0 (evo's
-    ``filter_pairs_by_path``).
+    first pose is the first segment end; each next segment ends at the first pose whose path
+    length from the previous end reaches ``d``; consecutive ends are the pairs, so the first
+    pair starts at pose 0 (evo's ``filter_pairs_by_path``, checked against evo 1.38.1).
   * ``"evo_all_pairs"``: ``evo_rpe … --all_pairs``: every pose ``i`` whose best partner ``j``
     (``L_j − L_i`` nearest to ``d``, the earlier pose on a tie) lies within the relative
     tolerance: ``|L_j − L_i − d| ≤ tolerance · d`` (evo's default tolerance is 0.1).
@@ -49,17 +48,22 @@ from .alignment import Alignment, umeyama_alignment
 from .velocity_track import EgoVelocityTrack
 
 __all__ = [
+    "DRIFT_LENGTHS",
     "RPE_PAIRINGS",
     "ATEResult",
+    "DriftResult",
+    "FinalError",
     "RPEPairing",
     "RPEResult",
     "VelocityErrors",
     "absolute_trajectory_error",
     "apply_alignment",
     "associate_trajectories",
+    "final_position_error",
     "path_length",
     "relative_pose_error",
     "rpe_pairs",
+    "trajectory_drift",
     "velocity_errors",
 ]
 
@@ -200,7 +204,10 @@ def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
         al = umeyama_alignment(est.translations, ref.translations, with_scale=align == "sim3")
     elif align == "origin":
         rot = ref.rotations[0] * est.rotations[0].inv()
-        al = Alignment(rot, ref.translations[0] - rot.apply(est.translations[0]))
+        # A copy: Trajectory arrays are read-only, and SciPy's Rotation.apply (Cython memory
+        # view) refuses a read-only buffer.
+        first = np.array(est.translations[0], dtype=np.float64)
+        al = Alignment(rot, ref.translations[0] - rot.apply(first))
     else:
         al = Alignment.identity()
     aligned = apply_alignment(est, al)
@@ -316,10 +323,12 @@ def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_po
         i = np.flatnonzero(j < n)
         return i.astype(np.int64), j[i].astype(np.int64)
     if pairing == "evo":
-        # Segment ends: the first pose with dist >= d, then each next pose at least d further
-        # along the path than the previous end. One search per segment, not per pose.
+        # Segment ends: pose 0, then each next pose at least d further along the path than
+        # the previous end (evo >= 1.x restarts its path sum from 0 at each end; the searches on
+        # the cumulative path give the same poses up to rounding, which ``slack`` covers). One
+        # search per segment, not per pose.
         ends: list[int] = []
-        k = int(np.searchsorted(dist, d - slack, side="left")) if n else 0
+        k = 0
         while k < n:
             ends.append(k)
             k = int(np.searchsorted(dist, dist[k] + d - slack, side="left"))
@@ -391,6 +400,127 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
         out.append(RPEResult(float(d), est.timestamps[i], est.timestamps[j], err_t, err_r,
                              pairing))
     return out
+
+
+DRIFT_LENGTHS: tuple[float, ...] = (2.0, 4.0, 6.0, 8.0, 10.0)
+"""Segment lengths [m] of :func:`trajectory_drift`: KITTI's eight equally spaced lengths
+(100…800 m, for cars) scaled to a hand-held rig indoors, where a ColoRadar run covers 20–150 m."""
+
+
+@dataclass(frozen=True, eq=False)
+class DriftResult:
+    """KITTI-style drift: RPE pooled over every segment of several lengths.
+
+    Attributes
+    ----------
+    segments
+        One :class:`RPEResult` per length (``every_pose`` pairing: every pose starts a segment
+        of each length, ending at the first pose at least that far along the reference's path).
+    """
+
+    segments: list[RPEResult]
+
+    @property
+    def lengths(self) -> tuple[float, ...]:
+        """The segment lengths [m]."""
+        return tuple(r.distance for r in self.segments)
+
+    @property
+    def translation_ratios(self) -> np.ndarray:
+        """float64 ``(K,)``: ``|t_E| / L`` of every segment of every length [m/m]."""
+        parts = [r.translation_errors / r.distance for r in self.segments]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    @property
+    def rotation_ratios(self) -> np.ndarray:
+        """float64 ``(K,)``: ``angle(E) / L`` of every segment of every length [deg/m]."""
+        parts = [r.rotation_errors / r.distance for r in self.segments]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    @property
+    def pairs(self) -> int:
+        """Segments over all lengths."""
+        return int(sum(r.pairs for r in self.segments))
+
+    @property
+    def translation_percent(self) -> float:
+        """Mean of ``100 |t_E| / L`` over every segment of every length [%]; NaN without one."""
+        r = self.translation_ratios
+        return float(100.0 * r.mean()) if r.size else float("nan")
+
+    @property
+    def rotation_deg_per_m(self) -> float:
+        """Mean of ``angle(E) / L`` over every segment of every length [deg/m]."""
+        r = self.rotation_ratios
+        return float(r.mean()) if r.size else float("nan")
+
+
+def trajectory_drift(estimate: Trajectory, reference: Trajectory,
+                     lengths: tuple[float, ...] | list[float] = DRIFT_LENGTHS, *,
+                     max_gap: float | None = 1.0) -> DriftResult:
+    """Translation drift [%] and rotation drift [deg/m] averaged the KITTI way.
+
+    The KITTI odometry devkit (Geiger et al., CVPR 2012) takes segments of each length ``L``
+    starting at every 10th frame, ending at the first frame at least ``L`` further along the
+    ground truth's path, and averages ``|t_E| / L`` and ``angle(E) / L`` over *all* segments of
+    all lengths together (so a length with more segments weighs more). Here every pose starts a
+    segment (``pairing="every_pose"`` of :func:`relative_pose_error`); ``E`` as there.
+
+    Parameters
+    ----------
+    estimate, reference
+        ``world_T_body(t)`` of the same body.
+    lengths
+        Segment lengths [m]; default :data:`DRIFT_LENGTHS`.
+    max_gap
+        See :func:`associate_trajectories`.
+
+    Returns
+    -------
+    DriftResult
+    """
+    return DriftResult(relative_pose_error(estimate, reference, lengths, max_gap=max_gap,
+                                           pairing="every_pose"))
+
+
+@dataclass(frozen=True, eq=False)
+class FinalError:
+    """Position error at the end of a trajectory whose first pose is put on the reference's.
+
+    Attributes
+    ----------
+    error
+        ``|p_ref − p_est|`` at the last associated pose after ``origin`` alignment [m].
+    path_length
+        Distance travelled along the reference over the associated span [m].
+    """
+
+    error: float
+    path_length: float
+
+    @property
+    def percent(self) -> float:
+        """``100 · error / path_length`` [%] (NaN for no motion)."""
+        return 100.0 * self.error / self.path_length if self.path_length > 0 else float("nan")
+
+
+def final_position_error(estimate: Trajectory, reference: Trajectory, *,
+                         max_gap: float | None = 1.0) -> FinalError:
+    """Where the estimate ends against where the reference ends, from the same start.
+
+    The estimate is moved so that its first associated pose coincides with the reference's
+    there (position and attitude: evo's ``--align_origin``); no later pose is used to align,
+    so this is the drift a user of the estimate would see at the end of the run.
+
+    Parameters
+    ----------
+    estimate, reference
+        ``world_T_body(t)`` of the same body.
+    max_gap
+        See :func:`associate_trajectories`.
+    """
+    ate = absolute_trajectory_error(estimate, reference, align="origin", max_gap=max_gap)
+    return FinalError(float(ate.errors[-1]), ate.path_length)
 
 
 @dataclass(frozen=True, eq=False)
