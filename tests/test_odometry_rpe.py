@@ -34,12 +34,12 @@ def _noisy(ref, seed=4):
 
 
 def _brute_evo_consecutive(p, d):
-    """evo ``-u m``: accumulate the step lengths; when the sum reaches d, that pose ends a
-    segment and the sum restarts from 0. Consecutive ends form the pairs."""
-    ends, acc = [], 0.0
-    for k in range(len(p)):
-        if k:
-            acc += np.linalg.norm(p[k] - p[k - 1])
+    """evo ``-u m``: the first pose is a segment end; accumulate the step lengths; when the sum
+    reaches d, that pose ends a segment and the sum restarts from 0. Consecutive ends form the
+    pairs."""
+    ends, acc = [0], 0.0
+    for k in range(1, len(p)):
+        acc += np.linalg.norm(p[k] - p[k - 1])
         if acc >= d:
             ends.append(k)
             acc = 0.0
@@ -118,11 +118,14 @@ def test_rpe_pairs_and_errors_match_a_brute_force_of_the_rule(pairing, d, pairs_
 
 def test_evo_pairs_on_a_straight_line_counted_by_hand():
     # Poses 0.4 m apart, d = 1 m: the path reaches 1.2 m at pose 3, restarts there, and so on.
-    # evo's first pair starts at the first segment end (pose 3), not at pose 0.
+    # evo's first segment starts at pose 0.
     p = np.zeros((13, 3))
     p[:, 0] = 0.4 * np.arange(13)
     i, j = rpe_pairs(path_length(p), 1.0, "evo")
-    assert list(zip(i, j, strict=True)) == [(3, 6), (6, 9), (9, 12)]
+    assert list(zip(i, j, strict=True)) == [(0, 3), (3, 6), (6, 9), (9, 12)]
+    # A path shorter than d: pose 0 alone ends a segment, no pair.
+    i, j = rpe_pairs(path_length(p[:3]), 1.0, "evo")
+    assert i.size == 0
     i, j = rpe_pairs(path_length(p), 1.0, "every_pose")
     assert list(zip(i, j, strict=True)) == [(k, k + 3) for k in range(10)]
     # All pairs: 1.2 m (3 steps) and 0.8 m (2 steps) are both 0.2 m off d = 1 m, outside the
