@@ -16,8 +16,8 @@ from coloradar import OutputExistsError, SettingsError, open_sequence
 from coloradar.cli.main import main
 from coloradar.dataset import splits
 from coloradar.geometry import Trajectory, trajectory_from_groundtruth
-from coloradar.odometry import write_tum
 from coloradar.odometry import benchmark as bm
+from coloradar.odometry import write_tum
 from coloradar.sim import run as sim_run
 
 DRIFT_RATE = 0.02   # m/s of lateral drift in the "drifting" estimate

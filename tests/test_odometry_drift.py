@@ -105,7 +105,7 @@ def test_ate_and_final_error_of_a_known_error():
     n = len(ref)
     # A constant lateral offset of 0.3 m: with no alignment every error is 0.3 m; the first
     # poses put together (origin) remove it, and the end is then exact.
-    off = Trajectory(ref.timestamps, ref.translations + [0.0, 0.3, 0.0], ref.rotations, "off")
+    off = Trajectory(ref.timestamps, ref.translations + np.array([0.0, 0.3, 0.0]), ref.rotations, "off")
     a = absolute_trajectory_error(off, ref, align="none")
     assert a.rmse == pytest.approx(0.3) and a.max == pytest.approx(0.3)
     assert a.path_length == pytest.approx(10.0)
@@ -124,7 +124,7 @@ def test_ate_and_final_error_of_a_known_error():
     # A rigid transform of the truth (any frame a user's method may start in) has no error
     # after se3 or origin alignment.
     g = Rotation.from_euler("zyx", [40, -10, 5], degrees=True)
-    moved = Trajectory(ref.timestamps, g.apply(np.array(ref.translations)) + [5.0, -2.0, 1.0],
+    moved = Trajectory(ref.timestamps, g.apply(np.array(ref.translations)) + np.array([5, -2, 1.0]),
                        g * ref.rotations, "moved")
     for align in ("se3", "origin"):
         res = absolute_trajectory_error(moved, ref, align=align)
@@ -150,7 +150,7 @@ def test_evaluation_writes_the_ground_truth_at_the_estimates_timestamps(tmp_path
     te = T0 - 0.3 + 0.0731 + np.arange(130) * 0.0777
     true = np.zeros((te.size, 3))
     true[:, 0] = 0.8 * (te - T0)
-    est = Trajectory(te, true + [0.0, 0.05, 0.0],
+    est = Trajectory(te, true + np.array([0.0, 0.05, 0.0]),
                      Rotation.from_rotvec(np.outer(te - T0, [0, 0, 0.05])), "est")
     ev = evaluate_trajectory(est, ref, distances=(1.0,))
     write_evaluation(ev, tmp_path, plot=False)
