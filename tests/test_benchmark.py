@@ -139,6 +139,18 @@ def test_benchmark_command_end_to_end(dataset, tmp_path, capsys):
         assert (out / "coloradar" / run1 / name).is_file()
     assert (out / "moved" / run2 / "trajectory.txt").is_file()
 
+    # Equal terms: our own output folder given back as someone else's TUM files (with its
+    # ego_velocity.csv) gets the same figures as our row, but no frames/s.
+    again = bm.benchmark(root, tmp_path / "again", methods=[bm.tum_method(out / "coloradar",
+                                                                          "copy")],
+                         align="origin", progress=False)
+    for row in again.rows:
+        ours = rows[(row["run"], "coloradar")]
+        for key in ("ate_rmse_m", "final_error_percent", "drift_percent",
+                    "rotation_drift_deg_per_m", "ego_velocity_rmse_m_s"):
+            assert row[key] == pytest.approx(float(ours[key]), rel=1e-9)
+        assert row["frames_per_s"] is None
+
     # The same command resumes: finished rows are kept as they are, the failed run retried.
     stamp = os.stat(out / "coloradar" / run1 / "row.json").st_mtime_ns
     code = main(["benchmark", *argv, "--quiet"])

@@ -47,8 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "their errors",
         description="Run odometry on every run of DATASET (or --runs / --split), evaluate "
                     "each estimate against the ground truth the same way, and write one "
-                    "table: per run and overall ATE (m and %% of the distance), final-position "
-                    "error %%, KITTI-style translation drift (%%) and rotation drift (deg/m), "
+                    "table: per run and overall ATE (m and % of the distance), final-position "
+                    "error %, KITTI-style translation drift (%) and rotation drift (deg/m), "
                     "ego-velocity RMSE and frames/s. Your own method joins the table as a "
                     "folder of TUM files (--estimate) or a Python function (--method). Output: "
                     "DIR/benchmark.txt, .csv, .json and DIR/<method>/<run>/ (estimate, "
