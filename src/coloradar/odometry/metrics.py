@@ -31,6 +31,11 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
   * ``"evo_all_pairs"``: ``evo_rpe … --all_pairs``: every pose ``i`` whose best partner ``j``
     (``L_j − L_i`` nearest to ``d``, the earlier pose on a tie) lies within the relative
     tolerance: ``|L_j − L_i − d| ≤ tolerance · d`` (evo's default tolerance is 0.1).
+- **Drift** (:func:`trajectory_drift`): RPE with ``every_pose`` pairs over several lengths
+  (:data:`DRIFT_LENGTHS`), ``|t_E|/L`` and ``angle(E)/L`` averaged over all segments of all
+  lengths together, as the KITTI devkit averages.
+- **Final position error** (:func:`final_position_error`): the end-point error after ``origin``
+  alignment, in metres and percent of the distance travelled.
 """
 
 from __future__ import annotations
