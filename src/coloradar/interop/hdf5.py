@@ -74,7 +74,8 @@ DESCRIPTIONS = {
     "lidar_time": "time of the nearest lidar scan, Unix seconds",
     "heatmap": "radar heatmap (el, az, range, 2): intensity, range rate [m/s]",
     "polar": "range-azimuth image (C, range, az): intensity [dB], range rate [m/s]",
-    "bev": "bird's-eye image (C, nx, ny), radar frame: intensity [dB], range rate [m/s]; NaN outside the field of view",
+    "bev": "bird's-eye image (C, nx, ny), radar frame: intensity [dB], range rate [m/s]; "
+           "NaN outside the field of view",
     "lidar_polar": "lidar target on the polar grid (3, range, az): occupancy, height [m], intensity",
     "lidar_bev": "lidar target on the BEV grid (3, nx, ny): occupancy, height [m], intensity",
     "points": "radar point cloud x y z [m] intensity range_rate [m/s], radar frame",

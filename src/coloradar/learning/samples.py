@@ -225,7 +225,7 @@ class SyncedSamples:
             raise SettingsError("mix of exported files and run folders: give one kind")
         self._runs: list[Any]
         if files:
-            from ..interop.hdf5 import H5Run   # lazily: h5py is an optional extra
+            from ..interop.hdf5 import H5Run  # lazily: h5py is an optional extra
 
             self._runs = [H5Run(f) for f in files]
             first = self._runs[0]

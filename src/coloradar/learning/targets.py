@@ -84,9 +84,9 @@ class VoxelMap:
         if not voxel_size > 0:
             raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
         self.voxel_size = float(voxel_size)
-        self._keys = np.zeros(0, dtype=np.int64)
-        self._hits = np.zeros(0, dtype=np.int64)
-        self._isum = np.zeros(0, dtype=np.float64)
+        self._keys: np.ndarray = np.zeros(0, dtype=np.int64)
+        self._hits: np.ndarray = np.zeros(0, dtype=np.int64)
+        self._isum: np.ndarray = np.zeros(0, dtype=np.float64)
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._pending_n = 0
         self.scans = 0
@@ -126,8 +126,8 @@ class VoxelMap:
         hits = np.concatenate([self._hits, *(h for _, h, _ in self._pending)])
         isum = np.concatenate([self._isum, *(s for _, _, s in self._pending)])
         self._pending, self._pending_n = [], 0
-        self._keys, inv = np.unique(keys, return_inverse=True)
-        inv = inv.reshape(-1)
+        self._keys, inv_any = np.unique(keys, return_inverse=True)
+        inv = np.asarray(inv_any).reshape(-1)
         self._hits = np.bincount(inv, weights=hits, minlength=self._keys.size).astype(np.int64)
         self._isum = np.bincount(inv, weights=isum, minlength=self._keys.size)
 
