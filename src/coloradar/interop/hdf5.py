@@ -333,6 +333,7 @@ class H5Run:
                                             np.asarray(a["azimuth_bins"]),
                                             np.asarray(a["elevation_bins"]))
             self.radar_k = f["radar_frame"][()]
+            self.frame_ids = f["frame_id"][()]
             self._times = f["radar_time"][()]
         self._file: Any = None
 
