@@ -203,7 +203,8 @@ def format_score_report(r: ScoreReport) -> str:
              f"recall {f('recall')})",
              f"  BEV occupancy ({r.grid.cell:g} m)   IoU {f('bev_iou')}  precision "
              f"{f('bev_precision')}  recall {f('bev_recall')}",
-             f"  points per frame          predicted {f('num_pred', digits=0)}, target {f('num_target', digits=0)}"]
+             f"  points per frame          predicted {f('num_pred', digits=0)}, "
+             f"target {f('num_target', digits=0)}"]
     return "\n".join(lines) + "\n"
 
 
