@@ -255,16 +255,20 @@ class SyncedSamples:
                              targets=self.targets, target_settings=self.target_settings,
                              views=self.views, pose_source=pose_source,
                              lidar_tolerance=lidar_tolerance, points_tolerance=points_tolerance)
-        if not files:
-            self._runs = [self._index_run(s, lidar_tolerance, points_tolerance) for s in items]
         if runs is not None:
+            # Select before indexing: the other runs may lack what this view needs.
             wanted = list(runs)
-            have = {r.name: r for r in self._runs}
+            have = {r.name: r for r in (self._runs if files else items)}
             missing = [r for r in wanted if r not in have]
             if missing:
                 raise MissingDataError(f"no run named {', '.join(missing)} (runs: "
                                        f"{', '.join(sorted(have)) or 'none'})")
-            self._runs = [have[r] for r in wanted]
+            if files:
+                self._runs = [have[r] for r in wanted]
+            else:
+                items = [have[r] for r in wanted]
+        if not files:
+            self._runs = [self._index_run(s, lidar_tolerance, points_tolerance) for s in items]
         if not self._runs and source is not None:
             raise MissingDataError(f"{source}: no runs")
         self.runs = [r.name for r in self._runs]

@@ -78,9 +78,12 @@ class VoxelMap:
     voxel_size
         Voxel edge [m]; voxel ``(i, j, k)`` covers ``[i·s, (i+1)·s) × …`` and its centre is
         ``((i + ½)·s, …)``. Coordinates must lie within ±``2^20·s`` (±105 km at 0.1 m).
+    flush_every
+        Scans' voxels are merged into the map once this many are pending (or the map's own
+        size, if larger): bounds the pending memory.
     """
 
-    def __init__(self, voxel_size: float = 0.1):
+    def __init__(self, voxel_size: float = 0.1, flush_every: int = 1 << 20):
         if not voxel_size > 0:
             raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
         self.voxel_size = float(voxel_size)
@@ -90,6 +93,7 @@ class VoxelMap:
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._pending_n = 0
         self.scans = 0
+        self._flush_every = max(1, int(flush_every))
 
     def _pack(self, xyz: np.ndarray) -> np.ndarray:
         ijk = np.floor(xyz / self.voxel_size).astype(np.int64) + _OFFSET
@@ -116,7 +120,7 @@ class VoxelMap:
             inv.reshape(-1), minlength=keys.size)
         self._pending.append((keys, np.ones(keys.size, dtype=np.int64), isum))
         self._pending_n += keys.size
-        if self._pending_n > max(self._keys.size, 1 << 20):
+        if self._pending_n > max(self._keys.size, self._flush_every):
             self._flush()
 
     def _flush(self) -> None:
