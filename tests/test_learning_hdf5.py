@@ -81,7 +81,7 @@ def test_written_atomically_and_never_over_a_file(run, tmp_path):
     with pytest.raises(RuntimeError):
         export_hdf5(run, tmp_path / "y.h5", radar="single_chip", targets=False, progress=boom)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.h5"]   # no partial file left
-    with pytest.raises(ColoradarError, match="not a coloradar-learning file|not an HDF5"):
+    with pytest.raises(ColoradarError, match=r"not a coloradar-learning file|not an HDF5"):
         SyncedSamples(out)
 
 
@@ -107,7 +107,7 @@ def test_cli_export_and_score(run, tmp_path, capsys):
     shifted = tmp_path / "shifted"
     shifted.mkdir()
     for p in preds.iterdir():
-        np.save(shifted / p.name, np.load(p) + [0.5, 0.0, 0.0])
+        np.save(shifted / p.name, np.load(p) + np.array([0.5, 0.0, 0.0]))
     assert main(["score", str(shifted), str(run), "--radar", "single_chip", "--voxel-size", "0.2",
                  "--out", str(tmp_path / "s2.json"), "--quiet"]) == 0
     worse = json.loads((tmp_path / "s2.json").read_text())["mean"]

@@ -31,7 +31,8 @@ def test_voxel_map_against_a_brute_force_set():
         for key, inten in seen.items():
             want.setdefault(key, []).append(np.mean(inten))
     centres, hits, inten = vmap.voxels()
-    got = {tuple(int(v) for v in np.floor(c / 0.5)): (h, i) for c, h, i in zip(centres, hits, inten)}
+    got = {tuple(int(v) for v in np.floor(c / 0.5)): (h, i)
+           for c, h, i in zip(centres, hits, inten, strict=True)}
     assert set(got) == set(want)
     for key, vals in want.items():
         assert got[key][0] == len(vals)
