@@ -341,7 +341,9 @@ class H5Run:
         return int(self.radar_k.size)
 
     def __getstate__(self) -> dict[str, Any]:
-        return {k: (None if k == "_file" else v) for k, v in self.__dict__.items()}
+        # h5py handles do not pickle: a worker opens the file itself.
+        return {k: v for k, v in self.__dict__.items() if k not in ("_file", "_ds", "_small")} | {
+            "_file": None}
 
     def radar_times(self, radar: str) -> np.ndarray:
         return self._times.copy()
@@ -373,12 +375,18 @@ class H5Run:
 
     def _open(self) -> Any:
         if self._file is None:
-            self._file = _h5py().File(self.path, "r")
+            f = _h5py().File(self.path, "r")
+            # Small per-sample tables are read once; big datasets keep an open handle.
+            self._small = {k: f[k][()] for k in self.keys if k in _SCALARS}
+            self._small.update({k: f[k]["offsets"][()] for k in self.keys if k in _RAGGED})
+            self._ds = {k: (f[k]["data"] if k in _RAGGED else f[k]) for k in self.keys
+                        if k != "run" and k not in _SCALARS}
+            self._file = f
         return self._file
 
     def sample(self, k: int, products: Iterable[str], lidar: bool, targets: bool) -> dict[str, Any]:
         """Sample ``k`` with the keys the view asks for, in the order they were written."""
-        f = self._open()
+        self._open()
         asked = {*products, *(("lidar",) if lidar else ()), *(("targets",) if targets else ())}
         out: dict[str, Any] = {}
         for key in self.keys:
@@ -387,13 +395,12 @@ class H5Run:
             if key == "run":
                 out[key] = self.name
             elif key in ("radar_frame", "frame_id"):
-                out[key] = int(f[key][k])
+                out[key] = int(self._small[key][k])
             elif key in _SCALARS:
-                out[key] = float(f[key][k])
+                out[key] = float(self._small[key][k])
             elif key in _RAGGED:
-                o = f[key]["offsets"]
-                a, b = int(o[k]), int(o[k + 1])
-                out[key] = f[key]["data"][a:b]
+                o = self._small[key]
+                out[key] = self._ds[key][int(o[k]):int(o[k + 1])]
             else:
-                out[key] = f[key][k]
+                out[key] = self._ds[key][k]
         return out
