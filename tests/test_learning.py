@@ -169,3 +169,17 @@ def test_torch_dataset_and_collate(root):
     assert batch["lidar_batch"].max().item() == 3
     assert batch["world_T_base"].dtype == torch.float64 and batch["world_T_base"].shape == (4, 4, 4)
     assert torch.equal(batch["points"][batch["points_batch"] == 3], torch.from_numpy(view[3]["points"]))
+
+
+def test_views_pickle_for_spawned_workers(root):
+    """DataLoader workers under spawn receive the dataset pickled: samples must survive it."""
+    import pickle
+
+    view = SyncedSamples(root, radar="single_chip", products=("heatmap", "bev"), lidar=True,
+                         targets=True, runs=[RUN1])
+    before = view[1]   # builds the run's map and the BEV tables, which are not pickled
+    again = pickle.loads(pickle.dumps(view))
+    after = again[1]
+    assert list(after) == list(before)
+    for k, v in before.items():
+        assert np.array_equal(after[k], v, equal_nan=True) if isinstance(v, np.ndarray) else after[k] == v

@@ -7,6 +7,7 @@
 * :mod:`.metrics` — Chamfer, modified Hausdorff, F-score, BEV occupancy IoU / precision / recall.
 * :mod:`.splits` — run splits by a stable hash; the named splits of published work.
 * :mod:`.batching` — numpy and PyTorch collation; :func:`torch_dataset` (torch optional).
+* :mod:`.scoring` — a folder of predicted clouds against a run's targets (``coloradar score``).
 
 The file format written by ``coloradar export RUN OUT.h5 --format hdf5`` is
 :mod:`coloradar.interop.hdf5`. See docs/learning.md.
@@ -24,6 +25,7 @@ from .metrics import (
     score_clouds,
 )
 from .samples import PRODUCTS, SyncedSamples, ViewOptions
+from .scoring import ScoreReport, score_folder
 from .splits import named_split, named_splits, split_runs
 from .targets import MapCut, TargetSettings, VoxelMap, build_voxel_map, frame_target, prepare_cut
 from .views import (
@@ -48,6 +50,7 @@ __all__ = [
     "BevProjector",
     "CloudScores",
     "MapCut",
+    "ScoreReport",
     "SyncedSamples",
     "TargetSettings",
     "ViewOptions",
@@ -72,6 +75,7 @@ __all__ = [
     "radar_bev",
     "radar_polar",
     "score_clouds",
+    "score_folder",
     "split_runs",
     "torch_dataset",
 ]
