@@ -206,8 +206,11 @@ def build_voxel_map(seq: Any, settings: TargetSettings | None = None, *,
         if cloud is not None:
             r = np.linalg.norm(cloud[:, :3], axis=1)
             c = cloud[(r >= st.lidar_min_range) & (r <= st.lidar_max_range)]
-            world = SE3(rot[n], trans[n]) @ mount
-            vmap.add(world.apply_to_cloud(c))
+            m = (SE3(rot[n], trans[n]) @ mount).matrix()
+            world = np.empty((c.shape[0], 4))
+            world[:, :3] = c[:, :3].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+            world[:, 3] = c[:, 3] if c.shape[1] > 3 else 0.0
+            vmap.add(world)
         if progress is not None:
             progress(n + 1, idx.size)
     return vmap
