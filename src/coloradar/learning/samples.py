@@ -251,10 +251,6 @@ class SyncedSamples:
         self.target_settings = target_settings or TargetSettings()
         self.views = views or ViewOptions()
         self.pose_source = pose_source
-        self._options = dict(radar=radar, products=self.products, lidar=self.lidar,
-                             targets=self.targets, target_settings=self.target_settings,
-                             views=self.views, pose_source=pose_source,
-                             lidar_tolerance=lidar_tolerance, points_tolerance=points_tolerance)
         if runs is not None:
             # Select before indexing: the other runs may lack what this view needs.
             wanted = list(runs)
