@@ -183,3 +183,25 @@ def test_views_pickle_for_spawned_workers(root):
     assert list(after) == list(before)
     for k, v in before.items():
         assert np.array_equal(after[k], v, equal_nan=True) if isinstance(v, np.ndarray) else after[k] == v
+
+
+def test_named_splits_are_sourced_and_resolve_to_dated_run_names():
+    from coloradar.dataset.splits import named_split, named_splits, resolve_runs
+
+    for name in named_splits():
+        s = named_split(name)
+        assert "https://" in s.source and s.note
+        runs = [r for part in s.parts.values() for r in part]
+        assert len(runs) == len(set(runs))        # parts are disjoint
+    s = named_split("rmap2023")
+    assert "ec_hallways_run0" in s.parts["test"] and "ec_hallways_run1" in s.parts["train"]
+    have = ["12_21_2020_ec_hallways_run0", "12_21_2020_ec_hallways_run1", "ec_hallways_run10",
+            "2_28_2021_outdoors_run0"]
+    got = resolve_runs(["ec_hallways_run0", "ec_hallways_run1", "outdoors_run0", "aspen_run0",
+                        "ec_hallways_run10"], have)
+    assert got == {"ec_hallways_run0": "12_21_2020_ec_hallways_run0",
+                   "ec_hallways_run1": "12_21_2020_ec_hallways_run1",
+                   "outdoors_run0": "2_28_2021_outdoors_run0", "aspen_run0": None,
+                   "ec_hallways_run10": "ec_hallways_run10"}
+    with pytest.raises(ColoradarError, match="several"):
+        resolve_runs(["x_run0"], ["1_1_2020_x_run0", "2_2_2021_x_run0"])
