@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from coloradar import ColoradarError, open_dataset
+from coloradar import ColoradarError, DataWarning, open_dataset
 from coloradar.formats import parse_poses, parse_timestamps
 from coloradar.learning import SyncedSamples, collate_numpy, collate_torch, split_runs, torch_dataset
 from coloradar.sim.run import simulate_run
@@ -96,20 +96,34 @@ def test_pose_sync_over_a_dataset_root(root):
         assert np.allclose(s["world_T_base"], want, atol=1e-9)
 
 
-def test_split_by_run_is_deterministic_and_disjoint(root):
-    names = [f"run{i}" for i in range(11)]
+def test_split_by_run_is_stable_and_disjoint(root):
+    names = [f"run{i}" for i in range(40)]
     a, b = split_runs(names, seed=4), split_runs(list(reversed(names)), seed=4)
-    assert a == b
+    assert a == b and list(a) == ["train", "val", "test"]
     assert sorted(r for part in a.values() for r in part) == sorted(names)
-    assert [len(v) for v in a.values()] == [9, 1, 1]
     assert split_runs(names, seed=5) != a
-    assert all(split_runs(["x", "y", "z"], seed=s)["val"] for s in range(5))   # never an empty part
+    # Adding runs moves no other run: every old run keeps its part.
+    bigger = split_runs([*names, "new_a", "new_b", "2_28_2021_outdoors_run9"], seed=4)
+    for part, runs in a.items():
+        assert set(runs) <= set(bigger[part])
 
     view = SyncedSamples(root, radar="single_chip", products=("points",), lidar=False)
     parts = view.split({"train": 2, "test": 1}, seed=0)
     assert set(parts["train"].runs).isdisjoint(parts["test"].runs)
     assert len(parts["train"]) + len(parts["test"]) == len(view)
     assert view.split({"train": 2, "test": 1}, seed=0)["test"].runs == parts["test"].runs
+
+
+def test_a_one_run_dataset_keeps_and_says_its_empty_parts(root):
+    with pytest.warns(DataWarning, match="no run fell into"):
+        parts = split_runs(["only_run"], seed=0)
+    assert set(parts) == {"train", "val", "test"}
+    assert sum(len(v) for v in parts.values()) == 1
+    view = SyncedSamples(root, radar="single_chip", products=("points",), lidar=False, runs=[RUN1])
+    with pytest.warns(DataWarning):
+        views = view.split(seed=0)
+    assert set(views) == {"train", "val", "test"}
+    assert sorted(len(v) for v in views.values()) == [0, 0, len(view)]
 
 
 def test_collate_numpy_keeps_variable_clouds(root):
@@ -155,3 +169,39 @@ def test_torch_dataset_and_collate(root):
     assert batch["lidar_batch"].max().item() == 3
     assert batch["world_T_base"].dtype == torch.float64 and batch["world_T_base"].shape == (4, 4, 4)
     assert torch.equal(batch["points"][batch["points_batch"] == 3], torch.from_numpy(view[3]["points"]))
+
+
+def test_views_pickle_for_spawned_workers(root):
+    """DataLoader workers under spawn receive the dataset pickled: samples must survive it."""
+    import pickle
+
+    view = SyncedSamples(root, radar="single_chip", products=("heatmap", "bev"), lidar=True,
+                         targets=True, runs=[RUN1])
+    before = view[1]   # builds the run's map and the BEV tables, which are not pickled
+    again = pickle.loads(pickle.dumps(view))
+    after = again[1]
+    assert list(after) == list(before)
+    for k, v in before.items():
+        assert np.array_equal(after[k], v, equal_nan=True) if isinstance(v, np.ndarray) else after[k] == v
+
+
+def test_named_splits_are_sourced_and_resolve_to_dated_run_names():
+    from coloradar.dataset.splits import named_split, named_splits, resolve_runs
+
+    for name in named_splits():
+        s = named_split(name)
+        assert "https://" in s.source and s.note
+        runs = [r for part in s.parts.values() for r in part]
+        assert len(runs) == len(set(runs))        # parts are disjoint
+    s = named_split("rmap2023")
+    assert "ec_hallways_run0" in s.parts["test"] and "ec_hallways_run1" in s.parts["train"]
+    have = ["12_21_2020_ec_hallways_run0", "12_21_2020_ec_hallways_run1", "ec_hallways_run10",
+            "2_28_2021_outdoors_run0"]
+    got = resolve_runs(["ec_hallways_run0", "ec_hallways_run1", "outdoors_run0", "aspen_run0",
+                        "ec_hallways_run10"], have)
+    assert got == {"ec_hallways_run0": "12_21_2020_ec_hallways_run0",
+                   "ec_hallways_run1": "12_21_2020_ec_hallways_run1",
+                   "outdoors_run0": "2_28_2021_outdoors_run0", "aspen_run0": None,
+                   "ec_hallways_run10": "ec_hallways_run10"}
+    with pytest.raises(ColoradarError, match="several"):
+        resolve_runs(["x_run0"], ["1_1_2020_x_run0", "2_2_2021_x_run0"])

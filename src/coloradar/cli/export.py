@@ -7,6 +7,7 @@ import argparse
 from ..dataset import open_sequence
 from ..interop.ros import DEFAULT_TOPICS, GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, ROS_FORMATS, export_bag
 from ..progress import Progress
+from . import _export_hdf5
 from ._common import new_output_file, processing_setting
 
 
@@ -29,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "Needs the optional 'rosbags' package: pip install 'coloradar[ros]'.")
     p.add_argument("run", help="run folder or .zip")
     p.add_argument("out", help="output: a .bag file (ros1) or a bag folder (ros2)")
-    p.add_argument("--format", choices=ROS_FORMATS, required=True, help="bag format")
+    p.add_argument("--format", choices=(*ROS_FORMATS, _export_hdf5.HDF5), required=True,
+                   help="bag format, or hdf5 (learning data: one .h5 file)")
     p.add_argument("--streams", help="comma-separated subset of "
                    f"{','.join(DEFAULT_TOPICS)} (default: all the run has)")
     p.add_argument("--topic", type=_topic, action="append", default=[], metavar="STREAM=/TOPIC",
@@ -48,10 +50,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing bag")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    _export_hdf5.add_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.format == _export_hdf5.HDF5:
+        new_output_file(args.out, args.overwrite)
+        return _export_hdf5.run(args)
     streams = [s.strip() for s in args.streams.split(",") if s.strip()] if args.streams else None
     new_output_file(args.out, args.overwrite)  # fail before reading anything
     seq = open_sequence(args.run, calib=args.calib)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import fnmatch
 import hashlib
 import json
+import re
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from importlib import resources
 
 from ..errors import DataWarning, SettingsError
 
-__all__ = ["NamedSplit", "named_split", "named_splits", "select_runs", "stable_split"]
+__all__ = ["NamedSplit", "named_split", "named_splits", "resolve_runs", "select_runs", "stable_split"]
 
 DEFAULT_FRACTIONS: dict[str, float] = {"train": 0.8, "val": 0.1, "test": 0.1}
 
@@ -166,3 +167,41 @@ def select_runs(available: Iterable[str], patterns: str | Iterable[str] | None) 
             raise SettingsError(f"no run matches {p!r}; runs: {', '.join(names) or 'none'}")
         chosen.update(hit)
     return sorted(chosen)
+
+
+_DATE_PREFIX = re.compile(r"^\d{1,2}_\d{1,2}_\d{4}_")
+
+
+def resolve_runs(names: Iterable[str], available: Iterable[str]) -> dict[str, str | None]:
+    """Match run names as a source spells them to the runs of a dataset.
+
+    Published lists often drop the release's recording-date prefix (``ec_hallways_run0`` for
+    ``12_21_2020_ec_hallways_run0``). A name matches a run of ``available`` with the same name,
+    or else the one run that is ``<mm>_<dd>_<yyyy>_`` followed by the name.
+
+    Returns
+    -------
+    dict[str, str | None]
+        Source name -> the dataset's run name, None where the dataset has no such run.
+
+    Raises
+    ------
+    SettingsError
+        A name that matches more than one run (the same run recorded on two dates).
+    """
+    have = sorted(set(available))
+    by_suffix: dict[str, list[str]] = {}
+    for run in have:
+        m = _DATE_PREFIX.match(run)
+        if m:
+            by_suffix.setdefault(run[m.end():], []).append(run)
+    out: dict[str, str | None] = {}
+    for name in names:
+        if name in have:
+            out[name] = name
+            continue
+        hits = by_suffix.get(name, [])
+        if len(hits) > 1:
+            raise SettingsError(f"run {name!r} matches several runs: {', '.join(hits)}")
+        out[name] = hits[0] if hits else None
+    return out
