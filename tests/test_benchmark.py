@@ -190,6 +190,11 @@ def test_benchmark_selects_runs_by_pattern_and_by_named_split(dataset, tmp_path,
     assert res.overall[0]["status"] == "2/3 ok"
     with pytest.raises(SettingsError, match="no part"):
         bm.benchmark(root, tmp_path / "e", methods=[method], split="paper:val", progress=False)
+    # Published lists drop the release's date prefix: such a name still finds its run.
+    undated = splits.NamedSplit("undated", {"test": (run2.split("_", 3)[3],)}, "test entry")
+    monkeypatch.setattr(splits, "_registry", lambda: {"undated": undated})
+    res = bm.benchmark(root, tmp_path / "f", methods=[method], split="undated", progress=False)
+    assert [r["run"] for r in res.rows] == [run2] and res.ok
     # Never into a folder that holds something else.
     other = tmp_path / "other"
     other.mkdir()

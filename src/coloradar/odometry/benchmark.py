@@ -451,8 +451,10 @@ def choose_runs(available: Sequence[str], runs: str | Sequence[str] | None = Non
                 split: str | None = None) -> list[str]:
     """The run names a benchmark uses: ``runs`` patterns (:func:`coloradar.dataset.splits.
     select_runs`) or a named split ``NAME`` / ``NAME:PART`` (every part when none is named);
-    a split's runs that the dataset lacks are kept (they become failed rows)."""
-    from ..dataset.splits import named_split, select_runs
+    a split's runs are matched to the dataset's names (:func:`coloradar.dataset.splits.
+    resolve_runs`: published lists often drop the date prefix), and those the dataset lacks are
+    kept under the source's name (they become failed rows)."""
+    from ..dataset.splits import named_split, resolve_runs, select_runs
 
     if split is None:
         return select_runs(available, runs)
@@ -467,7 +469,8 @@ def choose_runs(available: Sequence[str], runs: str | Sequence[str] | None = Non
         chosen = list(ns.parts[part])
     else:
         chosen = [r for p in ns.parts.values() for r in p]
-    return sorted(dict.fromkeys(chosen))
+    matched = resolve_runs(chosen, available)
+    return sorted(dict.fromkeys(matched[r] or r for r in chosen))
 
 
 def _check_odometry_options(methods: Sequence[Method], odometry: dict) -> None:
