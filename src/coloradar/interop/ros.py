@@ -924,7 +924,7 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
             stream = topic_map[conn.topic]
             msg = reader.deserialize(raw, conn.msgtype)
             if stream == "tf_static":
-                for tr in msg.transforms:  # type: ignore[attr-defined]
+                for tr in msg.transforms:
                     tt, q = tr.transform.translation, tr.transform.rotation
                     edges[tr.child_frame_id] = (tr.header.frame_id, SE3(
                         Rotation.from_quat([q.x, q.y, q.z, q.w]), np.array([tt.x, tt.y, tt.z])))
@@ -932,7 +932,7 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
             stamp = _stamp(msg) if time_source == "header" else divmod(int(bag_ns), 1_000_000_000)
             k = len(times.setdefault(stream, []))
             times[stream].append(stamp)
-            frame_ids.setdefault(stream, getattr(msg.header, "frame_id", ""))  # type: ignore[attr-defined]
+            frame_ids.setdefault(stream, getattr(msg.header, "frame_id", ""))
             if _kind(stream) == "cloud":
                 what = f"{bag}: {conn.topic} message {k}"
                 layout = _layout(msg)
@@ -940,19 +940,19 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
                     cloud_fields[conn.topic] = layout.names
                     _check_cloud_fields(bag, conn.topic, stream, layout.names, prefer)
                 if stream == "lidar/pointclouds":
-                    pts = decode_cloud(layout, msg.data, LIDAR_FIELDS,  # type: ignore[attr-defined]
+                    pts = decode_cloud(layout, msg.data, LIDAR_FIELDS,
                                        aliases=FIELD_ALIASES, optional=("intensity",), what=what,
                                        prefer=prefer)
                     write_lidar_pointcloud(partial / _frame_rel(stream, k), pts)
                 else:
-                    pts = decode_cloud(layout, msg.data, RADAR_FIELDS,  # type: ignore[attr-defined]
+                    pts = decode_cloud(layout, msg.data, RADAR_FIELDS,
                                        aliases=FIELD_ALIASES, optional=("intensity", "doppler"),
                                        what=what, prefer=prefer)
                     if flip_range_rate:
                         pts[:, 4] = -pts[:, 4]
                     write_radar_pointcloud(partial / _frame_rel(stream, k), pts)
             elif stream == "imu":
-                a, w = msg.linear_acceleration, msg.angular_velocity  # type: ignore[attr-defined]
+                a, w = msg.linear_acceleration, msg.angular_velocity
                 rows.setdefault(stream, []).append(np.array([a.x, a.y, a.z, w.x, w.y, w.z]))
             else:
                 rows.setdefault(stream, []).append(_pose_row(msg))
