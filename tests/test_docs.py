@@ -26,7 +26,6 @@ import io
 import os
 import shlex
 import shutil
-import sys
 import warnings
 from pathlib import Path
 
