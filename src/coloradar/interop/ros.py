@@ -881,6 +881,10 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
     partial = root / f".{run_name}.partial"
     reader = _open_reader(bag)
     try:
+        if not sum(c.msgcount for c in reader.connections):
+            listed = sorted({c.topic for c in reader.connections})
+            raise MissingDataError(f"{bag}: an empty bag: no messages"
+                                   + (f" (topics: {', '.join(listed)})" if listed else ""))
         by_topic = {c.topic: c for c in reader.connections}
         conns = []
         for topic, stream in topic_map.items():
@@ -904,9 +908,9 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
         data_conns = [c for c in conns if topic_map[c.topic] != "tf_static"]
         if not any(c.msgcount for c in data_conns):
             raise MissingDataError(
-                f"{bag}: an empty bag: no message on "
-                f"{', '.join(c.topic for c in data_conns) or 'any data topic'} "
-                f"(it has {sum(c.msgcount for c in reader.connections)} messages in all)")
+                f"{bag}: no message on the mapped topics "
+                f"{', '.join(c.topic for c in data_conns) or '(only /tf_static)'}; the bag's "
+                f"messages are on: {', '.join(sorted(c.topic for c in reader.connections if c.msgcount))}")
         for c in data_conns:
             if not c.msgcount:
                 warnings.warn(f"{bag}: topic {c.topic} ({topic_map[c.topic]}) has no messages; "
