@@ -492,3 +492,16 @@ def test_import_usage_shows_out_as_required(capsys):
         main(["import", "some.bag"])                           # a usage error: exit 2
     assert exc.value.code == 2
     assert "required: OUT" in capsys.readouterr().err
+
+
+def test_a_damaged_message_is_one_named_error(run, tmp_path):
+    import sqlite3
+
+    out = tmp_path / "dmg"
+    export_bag(run, out, "ros2", streams=["imu"])
+    with sqlite3.connect(out / "dmg.db3") as db:              # one message cut to 3 bytes
+        db.execute("UPDATE messages SET data = x'000100' WHERE id = 5")
+    with pytest.raises(FormatError, match=r"dmg: a sensor_msgs/msg/Imu message on /imu/data "
+                                          r"\(bag time \d+ ns\) cannot be decoded"):
+        import_bag(out, tmp_path / "ds")
+    assert not list((tmp_path / "ds").glob(".*partial*"))      # nothing half-written is left

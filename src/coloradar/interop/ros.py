@@ -748,6 +748,19 @@ def _open_reader(bag: Path):
     return reader
 
 
+def _messages(reader: Any, conns: list, bag: Path) -> Iterator[tuple[Any, int, bytes]]:
+    """``reader.messages(connections=conns)``, a damaged bag a :class:`FormatError` naming it."""
+    it = reader.messages(connections=conns)
+    while True:
+        try:
+            item = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:  # rosbags' own error types: a damaged chunk or database
+            raise FormatError(f"{bag}: damaged, a message cannot be read ({exc})") from None
+        yield item
+
+
 CLOUD_FIELD_KEYS = ("intensity", "range_rate")
 """Point columns whose bag field name :func:`import_bag` can be told (``fields=``)."""
 
@@ -924,9 +937,13 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
         frame_ids: dict[str, str] = {}
         edges: dict[str, tuple[str, SE3]] = {}
         cloud_fields: dict[str, tuple[str, ...]] = {}   # topic -> fields of its first message
-        for done, (conn, bag_ns, raw) in enumerate(reader.messages(connections=conns), start=1):
+        for done, (conn, bag_ns, raw) in enumerate(_messages(reader, conns, bag), start=1):
             stream = topic_map[conn.topic]
-            msg = reader.deserialize(raw, conn.msgtype)
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except Exception as exc:  # rosbags' own error types: a damaged message
+                raise FormatError(f"{bag}: a {conn.msgtype} message on {conn.topic} (bag time "
+                                  f"{bag_ns} ns) cannot be decoded ({exc})") from None
             if stream == "tf_static":
                 for tr in msg.transforms:
                     tt, q = tr.transform.translation, tr.transform.rotation
