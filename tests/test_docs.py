@@ -89,9 +89,16 @@ def shared(tmp_path_factory) -> dict:
     # (hard links: no copy of the 350 MB).
     real = base / "coloradar"
     shutil.copytree(base / "data" / "calib", real / "calib")
-    shutil.copytree(base / "data" / SIM_RUN, real / REAL_RUN, copy_function=os.link)
+    shutil.copytree(base / "data" / SIM_RUN, real / REAL_RUN, copy_function=_link_or_copy)
     return {"base": base, "data": base / "data", "real": real, "outputs": {SHARED_SIM: sim},
             "namespaces": {}, "ran": set()}
+
+
+def _link_or_copy(src: str, dst: str) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:                        # a file system without hard links
+        shutil.copy2(src, dst)
 
 
 def _listing(folder: Path) -> list[str]:
