@@ -314,3 +314,41 @@ def test_settings_comparison_and_progress_line():
     bar.close()
     assert "10/40 frames" in log[0] and "frames/s" in log[0] and "ETA" in log[0]
     assert "1 failed" in log[0]
+
+
+SCRIPT = """
+from coloradar.batch.driver import process_dataset
+{guard}report = process_dataset({root!r}, {out!r}, runs=[{run!r}], jobs=2, chunk_size=1,
+{indent}                         frames=slice(0, 2), progress=False)
+{indent}print(report.summary())
+"""
+
+
+def test_a_script_without_main_guard_is_told_what_to_do(dataset, tmp_path):
+    # docs/batch.md's own example, run as a script: under 'spawn' (the default on macOS,
+    # Windows and Python >= 3.14; always used by the local pool) every worker imports the main
+    # module. Without the guard the workers die at start-up; that must not read as frames
+    # killing their workers ("out of memory"), nor end with exit status 0.
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
+    codes = {}
+    for guarded in (False, True):
+        script = tmp_path / f"job_{guarded}.py"
+        out = tmp_path / f"out_{guarded}"
+        script.write_text(SCRIPT.format(guard='if __name__ == "__main__":\n    ' if guarded else "",
+                                        indent="    " if guarded else "", root=str(dataset),
+                                        out=str(out), run=RUN1))
+        proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=240)
+        codes[guarded] = proc.returncode
+        saved = json.loads((out / "process_report.json").read_text())
+        if guarded:
+            assert saved["status"] == "ok" and saved["totals"]["done"] == 2, proc.stderr
+        else:
+            last = proc.stderr.strip().splitlines()[-1]
+            assert last.startswith("coloradar.batch.executors.WorkerStartupError: the 2 local "
+                                   "worker process(es) died while starting")
+            assert str(script) in last and 'if __name__ == "__main__":' in last
+            assert "out of memory" not in proc.stdout + last
+            assert saved["status"] == "failed" and "died while starting" in saved["error"]
+            assert saved["totals"]["failed"] == 0        # no frame is blamed
+    assert codes == {False: 1, True: 0}

@@ -100,3 +100,28 @@ def test_params_of_the_real_calibration():
     assert coup["data"].shape == (coup["num_tx"], coup["num_rx"], coup["num_range_bins"])
     hm = dl.read_heatmap_cfg(REFERENCE_CALIB / "cascade/heatmap_cfg.txt", {})
     assert hm["data_type"] == "heatmap" and len(hm["azimuth_bins"]) == hm["num_azimuth_bins"]
+
+
+def test_frames_written_after_the_first_call_are_seen(tmp_path):
+    # A recorder (or a conversion) still writing a run: the devkit's per-call interface must
+    # see what is on disk now, not what was there at the first call.
+    from coloradar import formats as fm
+
+    truth = write_run(tmp_path, n_lidar=2)
+    seq_dir = str(truth["path"])
+    lidar = dl.get_lidar_params(str(tmp_path / "calib"))
+    ts, clouds = truth["lidar/lidar_pointcloud"]
+    assert dl.get_timestamps(seq_dir, lidar) == ts.tolist()
+    assert np.array_equal(dl.get_pointcloud(1, seq_dir, lidar), clouds[1])
+    with pytest.raises(MissingDataError, match="numbered 2"):
+        dl.get_pointcloud(2, seq_dir, lidar)
+    new = np.arange(40, dtype=np.float32).reshape(10, 4)
+    fm.write_lidar_pointcloud(truth["path"] / "lidar/pointclouds/lidar_pointcloud_2.bin", new)
+    fm.write_timestamps(truth["path"] / "lidar/timestamps.txt", np.r_[ts, ts[-1] + 0.1])
+    assert dl.get_timestamps(seq_dir, lidar) == [*ts.tolist(), ts[-1] + 0.1]
+    assert np.array_equal(dl.get_pointcloud(2, seq_dir, lidar), new)
+    # and a removed frame is gone
+    (truth["path"] / "lidar/pointclouds/lidar_pointcloud_2.bin").unlink()
+    fm.write_timestamps(truth["path"] / "lidar/timestamps.txt", ts)
+    with pytest.raises(MissingDataError, match="numbered 2"):
+        dl.get_pointcloud(2, seq_dir, lidar)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from fractions import Fraction
 from pathlib import Path
 
@@ -9,7 +10,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from coloradar import CalibrationWarning, FormatError, MissingDataError, OutputExistsError, open_sequence
+from coloradar import (
+    CalibrationWarning,
+    DataWarning,
+    FormatError,
+    MissingDataError,
+    OutputExistsError,
+    open_sequence,
+)
 from coloradar.cli.main import main
 from coloradar.interop import decode_cloud, export_bag, import_bag, ns_to_times, times_to_ns
 from coloradar.interop.pointcloud2 import CloudLayout
@@ -220,9 +228,11 @@ def test_import_foreign_bag_with_topic_map_and_tf_chain(tmp_path):
                 data=data.reshape(-1).view(np.uint8), is_dense=True)
             w.write(c_pts, (t0 + k) * 10**9, ts.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
 
-    imp = import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds",
-                                                    "/tf_static": "tf_static"},
-                     base_frame="base_link")
+    with pytest.warns(DataWarning, match=r"/radar/detections has no field for intensity \(its fields: "
+                                         r"x, y, z, velocity\)"):
+        imp = import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds",
+                                                        "/tf_static": "tf_static"},
+                         base_frame="base_link")
     seq = open_sequence(imp.run_path)
     got = seq.single_chip.pointclouds
     assert np.array_equal(got.timestamps, t0 + np.arange(2) + 0.25)
@@ -292,3 +302,206 @@ def test_cli_export_and_import(run, tmp_path, capsys):
     assert np.array_equal(back.imu.data, run.imu.data)
     assert main(["import", str(bag), "--list"]) == 0
     assert "/rig/imu" in capsys.readouterr().out
+
+
+# -- what a new user meets: empty bags, foreign fields, clocks, bad frames ------------------------
+def _foreign_bag(path, fields=("x", "y", "z", "snr_db", "v_doppler_mps"), cloud_t0=1_700_000_000,
+                 imu_t0=1_700_000_000, n=3, seed=4):
+    """A ROS 2 bag as another recorder writes it: radar points with its own field names and an
+    IMU topic; returns the points written (float32, columns in ``fields`` order)."""
+    from rosbags.rosbag2 import Writer
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    rng = np.random.default_rng(seed)
+    clouds = [rng.standard_normal((5 + k, len(fields))).astype(np.float32) for k in range(n)]
+
+    def header(t, frame):
+        sec = int(t)
+        return T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=round((t - sec) * 1e9)),
+            frame_id=frame)
+
+    F = T["sensor_msgs/msg/PointField"]
+    V = T["geometry_msgs/msg/Vector3"]
+    with Writer(path, version=8) as w:
+        c_pts = w.add_connection("/radar/points", "sensor_msgs/msg/PointCloud2", typestore=ts)
+        c_imu = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
+        for k, p in enumerate(clouds):
+            t = cloud_t0 + 0.1 * k
+            cloud = T["sensor_msgs/msg/PointCloud2"](
+                header=header(t, "radar"), height=1, width=len(p),
+                fields=[F(name=nm, offset=4 * i, datatype=7, count=1) for i, nm in enumerate(fields)],
+                is_bigendian=False, point_step=4 * len(fields), row_step=4 * len(fields) * len(p),
+                data=p.astype("<f4").reshape(-1).view(np.uint8), is_dense=True)
+            w.write(c_pts, round(t * 1e9), ts.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
+        for k in range(4):
+            t = imu_t0 + 0.05 * k
+            imu = T["sensor_msgs/msg/Imu"](
+                header=header(t, "imu"),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=np.zeros(9), angular_velocity=V(x=0.0, y=0.0, z=0.1 * k),
+                angular_velocity_covariance=np.zeros(9), linear_acceleration=V(x=0.0, y=0.0, z=9.8),
+                linear_acceleration_covariance=np.zeros(9))
+            w.write(c_imu, round(t * 1e9), ts.serialize_cdr(imu, "sensor_msgs/msg/Imu"))
+    return clouds
+
+
+FOREIGN = {"/radar/points": "single_chip/pointclouds", "/imu": "imu"}
+
+
+def test_import_of_an_empty_bag_is_one_named_error(tmp_path, capsys):
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import Writer as Writer2
+
+    # Bags with topics but no message (what a recorder stopped at once leaves), both formats.
+    w1 = Writer1(tmp_path / "empty.bag")
+    w1.open()
+    w1.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=get_typestore(Stores.ROS1_NOETIC))
+    w1.close()
+    with Writer2(tmp_path / "empty2", version=8) as w2:
+        w2.add_connection("/imu/data", "sensor_msgs/msg/Imu", typestore=get_typestore(Stores.ROS2_HUMBLE))
+    with Writer2(tmp_path / "bare", version=8):
+        pass                                                     # not even a topic
+    for bag in (tmp_path / "empty.bag", tmp_path / "empty2", tmp_path / "bare"):
+        topics = "" if bag.name == "bare" else r" \(topics: /imu/data\)"
+        with pytest.raises(MissingDataError, match=rf"{bag}: an empty bag: no messages{topics}$"):
+            import_bag(bag, tmp_path / "ds")
+        assert main(["import", str(bag), str(tmp_path / "ds"), "--quiet"]) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"coloradar: error: {bag}: an empty bag") and err.count("\n") == 1
+    assert not (tmp_path / "ds").exists() or not any((tmp_path / "ds").iterdir())
+    # A zero-byte .bag file: one line too, also for --list (a rosbags traceback before).
+    (tmp_path / "zero.bag").write_bytes(b"")
+    for argv in (["import", str(tmp_path / "zero.bag"), str(tmp_path / "ds")],
+                 ["import", str(tmp_path / "zero.bag"), "--list"]):
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and err.startswith(f"coloradar: error: {tmp_path / 'zero.bag'}: ")
+
+
+def test_unrecognised_point_fields_are_said_and_can_be_mapped(tmp_path, capsys):
+    bag = tmp_path / "fieldbag"
+    clouds = _foreign_bag(bag)
+    with pytest.warns(DataWarning, match=r"/radar/points has no field for intensity or range_rate "
+                                         r"\(its fields: x, y, z, snr_db, v_doppler_mps\)"):
+        res = import_bag(bag, tmp_path / "ds", name="plain", topics=FOREIGN)
+    got = open_sequence(res.run_path).single_chip.pointclouds
+    assert all(np.all(got[k][:, 3:] == 0) for k in range(len(got)))   # zeros, but said
+    # Mapped: the recorder's values, in coloradar's columns (x y z intensity range_rate).
+    res = import_bag(bag, tmp_path / "ds", name="mapped", topics=FOREIGN,
+                     fields={"intensity": "snr_db", "range_rate": "v_doppler_mps"})
+    got = open_sequence(res.run_path).single_chip.pointclouds
+    for k, p in enumerate(clouds):
+        assert np.array_equal(got[k], p)
+    # Recorders with > 0 approaching: one switch gives coloradar's sign (> 0 receding).
+    res = import_bag(bag, tmp_path / "ds", name="flipped", topics=FOREIGN,
+                     fields={"intensity": "snr_db", "range_rate": "v_doppler_mps"}, flip_range_rate=True)
+    got = open_sequence(res.run_path).single_chip.pointclouds
+    assert np.array_equal(got[1][:, 4], -clouds[1][:, 4]) and np.array_equal(got[1][:, :4], clouds[1][:, :4])
+    # A mapped name the bag does not have is an error naming the fields found; nothing written.
+    with pytest.raises(FormatError, match=r"no point-cloud topic has the field 'snr' given for "
+                                          r"intensity \(fields found: /radar/points: x, y, z, snr_db"):
+        import_bag(bag, tmp_path / "ds", name="typo", topics=FOREIGN, fields={"intensity": "snr"})
+    assert not (tmp_path / "ds" / "typo").exists()
+    # The same from the command line.
+    argv = ["import", str(bag), str(tmp_path / "ds"), "--name", "cli", "--quiet",
+            "--topic", "/radar/points=single_chip/pointclouds", "--topic", "/imu=imu",
+            "--field", "intensity=snr_db", "--field", "range_rate=v_doppler_mps"]
+    assert main(argv) == 0
+    assert np.array_equal(open_sequence(tmp_path / "ds" / "cli").single_chip.pointclouds[2], clouds[2])
+    with pytest.warns(DataWarning, match="imported as zeros; name the fields with "
+                                         "--field intensity=NAME --field range_rate=NAME"):
+        assert main([*argv[:10], "--overwrite"]) == 0
+    assert main([*argv[:10], "--field", "speed=v"]) == 1
+    assert "expected intensity=FIELD or range_rate=FIELD" in capsys.readouterr().err
+
+
+def test_streams_that_do_not_overlap_in_time_are_said(tmp_path):
+    bag = tmp_path / "clocks"
+    _foreign_bag(bag, fields=("x", "y", "z", "intensity", "doppler"), imu_t0=1_700_000_100)
+    with pytest.warns(DataWarning, match=r"streams that do not overlap in time: "
+                                         r"single_chip/pointclouds and imu"):
+        res = import_bag(bag, tmp_path / "ds", topics=FOREIGN)
+    assert res.disjoint == [("single_chip/pointclouds", "imu")]
+    # Overlapping streams: no warning.
+    bag2 = tmp_path / "same_clock"
+    _foreign_bag(bag2, fields=("x", "y", "z", "intensity", "doppler"), imu_t0=1_700_000_000.1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert import_bag(bag2, tmp_path / "ds", topics=FOREIGN).disjoint == []
+
+
+def test_ros2_export_holds_normal_file_names(run, tmp_path):
+    out = tmp_path / "mybag"
+    export_bag(run, out, "ros2", streams=["imu", "groundtruth"])
+    assert sorted(p.name for p in out.iterdir()) == ["metadata.yaml", "mybag.db3"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mybag"]      # no partial left
+    meta = (out / "metadata.yaml").read_text()
+    assert "partial" not in meta and "mybag.db3" in meta
+    # `cp mybag/* elsewhere/` gets a whole bag: rosbags reads the copy.
+    copy = tmp_path / "copied"
+    copy.mkdir()
+    for f in out.glob("*"):                                  # what a shell's * expands to
+        (copy / f.name).write_bytes(f.read_bytes())
+    with AnyReader([copy]) as reader:
+        n = sum(1 for _ in reader.messages())
+    assert n == len(run.imu.timestamps) + len(run.groundtruth.timestamps)
+    export_bag(run, out, "ros2", streams=["imu"], overwrite=True)      # replaced the same way
+    assert sorted(p.name for p in out.iterdir()) == ["metadata.yaml", "mybag.db3"]
+
+
+@pytest.mark.parametrize("fmt", ["ros1", "ros2"])
+def test_export_skips_and_reports_a_bad_frame(run, tmp_path, fmt, capsys):
+    import shutil
+
+    root, src = tmp_path / "data", Path(run.location)
+    shutil.copytree(src.parent / "calib", root / "calib")
+    shutil.copytree(src, root / src.name)
+    lid = open_sequence(root / src.name).lidar.pointclouds
+    bad = Path(lid.path(2))
+    bad.write_bytes(bad.read_bytes()[:1001])                  # truncated mid-row
+    seq = open_sequence(root / src.name)
+    out = tmp_path / ("run.bag" if fmt == "ros1" else "run_ros2")
+    with pytest.warns(DataWarning, match=rf"{bad.name}.*lidar/pointclouds frame 2 skipped"):
+        res = export_bag(seq, out, fmt, streams=["lidar/pointclouds", "imu"])
+    assert len(res.failures) == 1 and str(bad) in res.failures[0]
+    assert res.counts["/lidar/points"] == len(lid) - 1
+    with AnyReader([out]) as reader:                          # a valid bag with all the rest
+        stamps = [t for c, t, _ in reader.messages() if c.topic == "/lidar/points"]
+        n_imu = sum(1 for c, _, _ in reader.messages() if c.topic == "/imu/data")
+    sec, nsec = times_to_ns(np.delete(lid.timestamps, 2))
+    assert stamps == list(sec * 10**9 + nsec) and n_imu == len(seq.imu.timestamps)
+    # The command goes on to the end, says it, and exits 1.
+    with pytest.warns(DataWarning, match=rf"{bad.name}"):   # on stderr: "warning: ...", one line
+        code = main(["export", str(root / src.name), str(tmp_path / "cli_out"),
+                     "--format", fmt, "--quiet", "--streams", "lidar/pointclouds,imu"])
+    cap = capsys.readouterr()
+    assert code == 1
+    assert "bad frames skipped: 1" in cap.out and f"/lidar/points {len(lid) - 1:>18}" in cap.out
+    assert "Traceback" not in cap.err
+    assert cap.err.rstrip().splitlines()[-1].startswith("coloradar: error: 1 frame(s) of ")
+
+
+def test_import_usage_shows_out_as_required(capsys):
+    with pytest.raises(SystemExit):
+        main(["import", "--help"])
+    usage = capsys.readouterr().out.split("\n\n")[0]
+    assert "BAG OUT" in usage and "[out]" not in usage and "[OUT]" not in usage
+    with pytest.raises(SystemExit) as exc:
+        main(["import", "some.bag"])                           # a usage error: exit 2
+    assert exc.value.code == 2
+    assert "required: OUT" in capsys.readouterr().err
+
+
+def test_a_damaged_message_is_one_named_error(run, tmp_path):
+    import sqlite3
+
+    out = tmp_path / "dmg"
+    export_bag(run, out, "ros2", streams=["imu"])
+    with sqlite3.connect(out / "dmg.db3") as db:              # one message cut to 3 bytes
+        db.execute("UPDATE messages SET data = x'000100' WHERE id = 5")
+    with pytest.raises(FormatError, match=r"dmg: a sensor_msgs/msg/Imu message on /imu/data "
+                                          r"\(bag time \d+ ns\) cannot be decoded"):
+        import_bag(out, tmp_path / "ds")
+    assert not list((tmp_path / "ds").glob(".*partial*"))      # nothing half-written is left

@@ -46,6 +46,7 @@ from .calib import (
 )
 from .dataset import FrameStream, Sequence, open_sequence
 from .errors import MissingDataError, SettingsError
+from .formats.layout import LAYOUTS
 from .formats.source import read_file_text
 
 __all__ = [
@@ -73,18 +74,47 @@ __all__ = [
 PathLike = str | os.PathLike[str]
 Params = dict[str, Any]
 
-_CACHE: dict[tuple[str, int], tuple[Sequence, Calibration | None]] = {}
+_CACHE: dict[tuple[str, int], tuple[tuple, Sequence, Calibration | None]] = {}
+
+
+def _run_state(run: Path) -> tuple:
+    """What changes when frames are added to, removed from or re-stamped in a run: the
+    modification time and size of the run folder, of each stream's timestamps file and data
+    folder (a folder's time changes when a file is added or removed), and of each table; or
+    of the zip. A few dozen ``stat`` calls, no listing, so every devkit call can afford it."""
+    def st(path: Path) -> tuple[int, int] | None:
+        try:
+            info = path.stat()
+        except OSError:
+            return None
+        return info.st_mtime_ns, info.st_size
+
+    if not run.is_dir():
+        return (st(run),)
+    rels = {""}
+    for layout in LAYOUTS.values():
+        for fl in layout.frames.values():
+            rels.update((fl.timestamps_path, fl.data, *fl.alt_data))
+        for tl in layout.tables.values():
+            rels.update((tl.path, tl.timestamps_path))
+    return tuple((rel, st(run / rel)) for rel in sorted(rels))
 
 
 def _sequence(seq_dir: PathLike, params: Params | None) -> Sequence:
     calib = (params or {}).get("_calibration")
-    key = (str(Path(seq_dir).resolve()), id(calib))
-    if key not in _CACHE:
+    path = Path(seq_dir).resolve()
+    key = (str(path), id(calib))
+    state = _run_state(path)
+    hit = _CACHE.get(key)
+    # Keyed by path and calibration, kept only while the run's files are as they were when it
+    # was opened: frames written (or removed) since are seen by the next call.
+    if hit is None or hit[0] != state:
+        _CACHE.pop(key, None)
         if len(_CACHE) >= 16:
             _CACHE.pop(next(iter(_CACHE)))
         # The calibration is kept with the sequence so that its id stays valid as a key.
-        _CACHE[key] = (open_sequence(seq_dir, calib=calib), calib)
-    return _CACHE[key][0]
+        _CACHE[key] = (state, open_sequence(seq_dir, calib=calib), calib)
+    return _CACHE[key][1]
 
 
 def _read(text_path: PathLike) -> tuple[str, str]:

@@ -39,7 +39,7 @@ from ..formats.atomic import make_output_dir, write_text_if_changed
 from ..formats.layout import LAYOUTS
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
-from .executors import Executor, TaskError, make_executor
+from .executors import Executor, TaskError, WorkerStartupError, make_executor
 from .layout import (
     PRODUCTS,
     clean_partial_files,
@@ -447,6 +447,9 @@ def process_targets(targets: Sequence[RunTarget], report_path: str | os.PathLike
                         _finish_radar(job, rj, prods)
             else:
                 report.executor = "nothing to do"
+        except WorkerStartupError as exc:
+            report.error = str(exc)
+            raise
         except BaseException:
             report.interrupted = True
             raise

@@ -22,6 +22,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 import warnings
@@ -35,7 +36,7 @@ from typing import Any, Literal, get_args
 from ..errors import CalibrationWarning, ColoradarError, DataWarning, MissingDependencyError, SettingsError
 
 __all__ = ["DaskExecutor", "Executor", "LocalExecutor", "SerialExecutor", "TaskError",
-           "make_executor"]
+           "WorkerStartupError", "make_executor"]
 
 TaskErrors = Literal["raise", "return"]
 """What a failing task does: raise in the caller, or come back as a :class:`TaskError`."""
@@ -128,7 +129,11 @@ def _watch_parent(parent_pid: int) -> None:
             os._exit(1)
 
 
-def _init_worker(parent_pid: int) -> None:
+def _init_worker(parent_pid: int, started: Any = None) -> None:
+    # Reaching this line means the worker has imported the caller's main module (what the
+    # spawn start method does first) and coloradar: the pool can run tasks.
+    if started is not None:
+        started.set()
     # Ctrl-C is the parent's to handle: it stops submitting, lets running tasks finish their
     # files and writes its report; a worker interrupted mid-task would only lose that work.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -141,6 +146,24 @@ def _init_worker(parent_pid: int) -> None:
 
 class WorkerDied(ColoradarError):
     """The worker process running a task died (killed, out of memory, crashed)."""
+
+
+class WorkerStartupError(ColoradarError, RuntimeError):
+    """The workers of a local pool died while starting, before any of them could run a task:
+    nearly always a script without an ``if __name__ == "__main__":`` guard, whose top-level
+    call to the batch functions runs again in every ``spawn``-ed worker."""
+
+
+def _startup_message(workers: int) -> str:
+    main = sys.modules.get("__main__")
+    script = getattr(main, "__file__", None)
+    where = f" ({script})" if script else ""
+    return (f"the {workers} local worker process(es) died while starting, before running any "
+            "task. With the 'spawn' start method every worker first imports the main "
+            f"module{where}, so a script that calls process_dataset(), process_run() or "
+            "process() at its top level runs that call again in each worker, which fails. Put "
+            'the call under `if __name__ == "__main__":` (see docs/batch.md), or pass jobs=1; '
+            "the workers' own error is printed above")
 
 
 class LocalExecutor(Executor):
@@ -161,12 +184,17 @@ class LocalExecutor(Executor):
         self.max_in_flight = max(max_in_flight or 2 * self.workers, 1)
         self.description = f"local process pool, {self.workers} workers"
         self.restarts = 0
+        ctx = multiprocessing.get_context("spawn")
+        # Set by the first worker that gets through start-up: a pool that breaks before any
+        # worker did is a start-up failure (the caller's script), not a task that killed it.
+        self._started = ctx.Event()
         self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(max_workers=self.workers,
                                    mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_init_worker, initargs=(os.getpid(),))
+                                   initializer=_init_worker,
+                                   initargs=(os.getpid(), self._started))
 
     def _restart(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
@@ -215,6 +243,11 @@ class LocalExecutor(Executor):
                     broken = True
                     done = set(pending)
                     wait(done)
+            if broken and not self._started.is_set():
+                # No worker ever got through start-up: re-running tasks cannot help, and
+                # blaming each task ("worker died, out of memory") would mislead.
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                raise WorkerStartupError(_startup_message(self.workers))
             for fut in done:
                 task = pending.pop(fut)
                 exc = fut.exception()

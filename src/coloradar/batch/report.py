@@ -96,6 +96,8 @@ class BatchReport:
         Run name -> :class:`RunOutcome`.
     workers
         Worker ``host:pid`` -> peak resident memory [bytes].
+    error
+        Why the job as a whole could not run (its workers could not start), or None.
     """
 
     executor: str = ""
@@ -107,6 +109,7 @@ class BatchReport:
     seconds: float = 0.0
     interrupted: bool = False
     path: Path | None = None
+    error: str | None = None
 
     def totals(self) -> dict[str, int]:
         """Frames asked for, done, skipped and failed over all runs."""
@@ -123,7 +126,7 @@ class BatchReport:
     @property
     def ok(self) -> bool:
         """True when nothing failed and the job was not interrupted."""
-        return not self.interrupted and self.totals()["failed"] == 0
+        return not self.interrupted and self.error is None and self.totals()["failed"] == 0
 
     @property
     def status(self) -> str:
@@ -142,7 +145,8 @@ class BatchReport:
         return {"format": "coloradar-process-report/1", "status": self.status,
                 "coloradar_version": __version__, "started": self.started,
                 "finished": self.finished, "seconds": round(self.seconds, 3),
-                "executor": self.executor, "options": self.options, "totals": self.totals(),
+                "executor": self.executor, "error": self.error, "options": self.options,
+                "totals": self.totals(),
                 "frames_per_second": round(self.frames_per_second, 3),
                 "workers": dict(sorted(self.workers.items())),
                 "runs": {n: r.to_json() for n, r in sorted(self.runs.items())}}
@@ -155,7 +159,7 @@ class BatchReport:
 
     def summary(self, max_failures: int = 10) -> str:
         """Lines for the screen: per run and radar counts, the first failures, totals."""
-        lines = []
+        lines = [f"FAILED: {self.error}"] if self.error else []
         for name, run in sorted(self.runs.items()):
             if run.error:
                 lines.append(f"{name}: FAILED: {run.error}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ..dataset import open_sequence
 from ..interop.ros import DEFAULT_TOPICS, GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, ROS_FORMATS, export_bag
@@ -77,4 +78,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {radar} points: {src}")
     for key, why in res.skipped.items():
         print(f"  skipped {key}: {why}")
+    if res.failures:
+        # Each was a warning on stderr as it was met (naming its file); the bag is complete
+        # and valid without them.
+        print(f"  bad frames skipped: {len(res.failures)}")
+        print(f"coloradar: error: {len(res.failures)} frame(s) of {args.run} could not be read "
+              "and were left out of the bag (named above)", file=sys.stderr)
+        return 1
     return 0

@@ -8,6 +8,7 @@ view: no per-point Python. The datatype numbers are those of ``sensor_msgs/Point
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,8 +79,9 @@ def encode_cloud(points: np.ndarray, names: tuple[str, ...]) -> tuple[CloudLayou
 
 
 def decode_cloud(layout: CloudLayout, data: np.ndarray | bytes | memoryview,
-                 names: tuple[str, ...], *, aliases: dict[str, tuple[str, ...]] | None = None,
-                 optional: tuple[str, ...] = (), what: str = "PointCloud2") -> np.ndarray:
+                 names: tuple[str, ...], *, aliases: Mapping[str, tuple[str, ...]] | None = None,
+                 optional: tuple[str, ...] = (), what: str = "PointCloud2",
+                 prefer: Mapping[str, str] | None = None) -> np.ndarray:
     """Read the fields ``names`` of a PointCloud2 buffer as a float32 ``(height·width, len(names))``.
 
     Parameters
@@ -96,6 +98,9 @@ def decode_cloud(layout: CloudLayout, data: np.ndarray | bytes | memoryview,
         Wanted fields that may be absent: their column is 0.
     what
         Names the message in errors (topic, time).
+    prefer
+        ``{wanted name: field name}`` tried before the wanted name and its aliases (a user's
+        own naming, e.g. ``{"doppler": "v_doppler_mps"}``).
 
     Raises
     ------
@@ -115,7 +120,8 @@ def decode_cloud(layout: CloudLayout, data: np.ndarray | bytes | memoryview,
     order = ">" if layout.is_bigendian else "<"
     out = np.zeros((n, len(names)), dtype=np.float32)
     for col, name in enumerate(names):
-        candidates = (name, *((aliases or {}).get(name, ())))
+        first = (prefer[name],) if prefer and name in prefer else ()
+        candidates = (*first, name, *((aliases or {}).get(name, ())))
         idx = next((by_name[c] for c in candidates if c in by_name), None)
         if idx is None:
             if name in optional:

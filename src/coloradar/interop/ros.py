@@ -57,6 +57,7 @@ from ..errors import (
     MissingDataError,
     MissingDependencyError,
     OutputExistsError,
+    ReadError,
     SettingsError,
 )
 from ..formats import (
@@ -80,6 +81,7 @@ __all__ = [
     "import_bag",
     "iter_topics",
     "ns_to_times",
+    "parse_field_map",
     "parse_topic_map",
     "times_to_ns",
 ]
@@ -186,6 +188,10 @@ class ExportResult:
         Wall time of the export.
     skipped
         Streams asked for (or known) that the run lacks, with the reason.
+    failures
+        Frames that could not be read or converted (a truncated file, say), one line each
+        naming the file: they were left out of the bag (each also a :class:`DataWarning`), and
+        the bag holds every other message.
     """
 
     path: Path
@@ -195,6 +201,7 @@ class ExportResult:
     frames: int = 0
     seconds: float = 0.0
     skipped: dict[str, str] = field(default_factory=dict)
+    failures: list[str] = field(default_factory=list)
 
     @property
     def messages(self) -> int:
@@ -335,12 +342,27 @@ class _Planned:
     msgtype: str = ""
 
 
+class _BadFrame(Exception):
+    """A frame of the run that cannot be exported; its message names the file."""
+
+
 def _message(b: _Builder, p: _Planned, k: int, sec: int, nsec: int,
              transforms: Mapping[str, Extrinsic]) -> Any:
-    """Sample ``k`` of ``p`` as a message stamped ``sec, nsec``."""
+    """Sample ``k`` of ``p`` as a message stamped ``sec, nsec``.
+
+    Raises
+    ------
+    _BadFrame
+        Frame ``k`` cannot be read or converted (malformed, vanished, not a regular file).
+    """
     header = b.header(sec, nsec, p.frame_id, k)
     if p.frames is not None:
-        data = p.frames[k] if p.convert is None else p.convert(p.frames[k])
+        try:
+            data = p.frames.read(k)
+            if p.convert is not None:
+                data = p.convert(data)
+        except (FormatError, ReadError, MissingDataError) as exc:
+            raise _BadFrame(f"{exc} ({p.frames.name} frame {k} skipped)") from None
         names = LIDAR_FIELDS if p.key == "lidar/pointclouds" else RADAR_FIELDS
         return b.cloud(header, np.asarray(data)[:, :len(names)], names)
     if p.key == "tf_static":
@@ -492,13 +514,20 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
     order = np.lexsort((frame_k, stream_i, nsec, sec))
     total = int(order.size)
 
+    # The bag is written under a hidden partial name and renamed into place when complete.
+    # rosbag2 names its data file after the bag folder (NAME/NAME.db3, listed in
+    # metadata.yaml), so a ROS 2 bag is written as .NAME.partial/NAME and the folder NAME is
+    # moved out: the final bag holds the normal names that `ls` and `cp NAME/*` see.
     partial = out.with_name(f".{out.name}.partial")
-    if partial.exists():  # left by an interrupted export of ours
-        shutil.rmtree(partial) if partial.is_dir() else partial.unlink()
+    if partial.exists() or partial.is_symlink():  # left by an interrupted export of ours
+        shutil.rmtree(partial) if partial.is_dir() and not partial.is_symlink() else partial.unlink()
     out.parent.mkdir(parents=True, exist_ok=True)
+    if fmt == "ros2":
+        partial.mkdir()
+    bag_path = partial / out.name if fmt == "ros2" else partial
     start = time.perf_counter()
     b = _builder(fmt)
-    writer = _open_writer(fmt, partial)
+    writer = _open_writer(fmt, bag_path)
     counts = {p.key: 0 for p in plan}
     try:
         conns = {}
@@ -514,7 +543,16 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
         for done, j in enumerate(order, start=1):
             p = plan[int(stream_i[j])]
             t_s, t_ns, k = int(sec[j]), int(nsec[j]), int(frame_k[j])
-            msg = _message(b, p, k, t_s, t_ns, seq.calib.transforms)
+            try:
+                msg = _message(b, p, k, t_s, t_ns, seq.calib.transforms)
+            except _BadFrame as exc:
+                # Skipped and reported, as every other command does with a bad frame; the bag
+                # stays valid and holds every other message.
+                result.failures.append(str(exc))
+                warnings.warn(str(exc), DataWarning, stacklevel=2)
+                if progress is not None:
+                    progress(done, total)
+                continue
             writer.write(conns[p.key], t_s * 1_000_000_000 + t_ns, b.serialize(msg, p.msgtype))
             counts[p.key] += 1
             result.frames += int(p.frames is not None)
@@ -529,7 +567,9 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
         if partial.exists():
             shutil.rmtree(partial) if partial.is_dir() else partial.unlink()
         raise
-    _replace(partial, out)
+    _replace(bag_path, out)
+    if fmt == "ros2":
+        partial.rmdir()
     result.counts = {topic_of[k]: v for k, v in counts.items()}
     result.seconds = time.perf_counter() - start
     return result
@@ -603,6 +643,9 @@ class ImportResult:
         :class:`CalibrationWarning` says so): the imported run is read with the kept one.
     ignored
         Topics of the bag that no stream took, with their message type.
+    disjoint
+        Pairs of imported streams whose time spans do not overlap (a :class:`DataWarning`
+        says so): they cannot be associated by time.
     seconds
         Wall time.
     """
@@ -615,6 +658,7 @@ class ImportResult:
     extrinsics: list[str] = field(default_factory=list)
     extrinsics_not_applied: list[str] = field(default_factory=list)
     ignored: dict[str, str] = field(default_factory=dict)
+    disjoint: list[tuple[str, str]] = field(default_factory=list)
     seconds: float = 0.0
 
 
@@ -689,6 +733,63 @@ def _bag_paths(bag: Path) -> list[Path]:
     return [bag]
 
 
+def _open_reader(bag: Path):
+    """An opened ``rosbags`` ``AnyReader`` on ``bag``, or a :class:`FormatError` naming it."""
+    from rosbags.highlevel import AnyReader
+
+    paths = _bag_paths(bag)
+    try:
+        reader = AnyReader(paths)
+        reader.open()
+    except Exception as exc:  # rosbags raises its own error types for unreadable bags
+        if isinstance(exc, ColoradarError):
+            raise
+        raise FormatError(f"{bag}: not a readable ROS bag ({exc})") from None
+    return reader
+
+
+def _messages(reader: Any, conns: list, bag: Path) -> Iterator[tuple[Any, int, bytes]]:
+    """``reader.messages(connections=conns)``, a damaged bag a :class:`FormatError` naming it."""
+    it = reader.messages(connections=conns)
+    while True:
+        try:
+            item = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:  # rosbags' own error types: a damaged chunk or database
+            raise FormatError(f"{bag}: damaged, a message cannot be read ({exc})") from None
+        yield item
+
+
+CLOUD_FIELD_KEYS = ("intensity", "range_rate")
+"""Point columns whose bag field name :func:`import_bag` can be told (``fields=``)."""
+
+
+def parse_field_map(items: Iterable[str]) -> dict[str, str]:
+    """``["intensity=snr_db", "range_rate=v_doppler_mps"]`` -> ``{column: bag field name}``.
+
+    Raises
+    ------
+    SettingsError
+        An item is not ``COLUMN=FIELD`` or names a column other than intensity / range_rate.
+    """
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, name = item.partition("=")
+        key, name = key.strip(), name.strip()
+        key = "range_rate" if key == "doppler" else key
+        if not sep or not name or key not in CLOUD_FIELD_KEYS:
+            raise SettingsError(f"field map entry {item!r}: expected intensity=FIELD or "
+                                "range_rate=FIELD, e.g. range_rate=v_doppler_mps")
+        out[key] = name
+    return out
+
+
+def _preferred(fields: Mapping[str, str]) -> dict[str, str]:
+    """A user's field map keyed by the decoder's column names (``range_rate`` is ``doppler``)."""
+    return {("doppler" if k == "range_rate" else k): v for k, v in fields.items()}
+
+
 def _resolve_tf(edges: Mapping[str, tuple[str, SE3]], frame: str, base: str) -> SE3 | None:
     """``base_T_frame`` through the tf tree (parent links), or None when ``frame`` is not below
     ``base``."""
@@ -709,6 +810,7 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
                calib: Calibration | str | os.PathLike[str] | None = None,
                base_frame: str = BASE_FRAME, time_source: str = "header",
                relative_poses: bool = False, overwrite: bool = False,
+               fields: Mapping[str, str] | None = None, flip_range_rate: bool = False,
                progress: Callable[[int, int], None] | None = None) -> ImportResult:
     """Turn a ROS 1 or ROS 2 bag into a ColoRadar run ``out/<name>`` readable by
     :func:`coloradar.open_sequence`.
@@ -736,6 +838,17 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
         Express the ground-truth poses relative to the first one, as the dataset's are.
     overwrite
         Replace an existing run folder of the same name.
+    fields
+        ``{"intensity": NAME, "range_rate": NAME}``: the PointField names a recorder uses for
+        the point columns, when they are none of the usual ones (``intensity``, ``power``,
+        ``snr``, ``rcs``, ``i``; ``doppler``, ``range_rate``, ``velocity``, ``v_doppler``,
+        ``radial_velocity``), e.g. ``{"intensity": "snr_db", "range_rate":
+        "v_doppler_mps"}``. A point-cloud topic with no field for a column imports it as zeros
+        and says so (a :class:`DataWarning` naming the topic and the fields it has).
+    flip_range_rate
+        Negate the imported range rates: coloradar's range rate is > 0 when the target recedes
+        (``docs/conventions.md``); set this for a recorder whose Doppler field is > 0 when the
+        target approaches.
     progress
         ``progress(done, total)`` callback, in messages.
 
@@ -746,16 +859,17 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
     Raises
     ------
     ColoradarError
-        A mapped topic is missing or has a message type its stream cannot take; a point cloud
-        lacks a field; the run exists and ``overwrite`` is not set.
+        A mapped topic is missing or has a message type its stream cannot take; the bag has no
+        message on any mapped topic; a point cloud lacks ``x y z``; a field named in
+        ``fields`` is in none of the point-cloud topics; the run exists and ``overwrite`` is
+        not set.
     """
     _rosbags()
-    from rosbags.highlevel import AnyReader
 
     if time_source not in ("header", "bag"):
         raise SettingsError(f"unknown time source {time_source!r}; expected header or bag")
     bag = Path(bag)
-    paths = _bag_paths(bag)
+    _bag_paths(bag)
     root = Path(out)
     run_name = name or bag.name.removesuffix(".bag")
     final = root / run_name
@@ -773,17 +887,17 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
     if dup:
         raise SettingsError(f"several topics map to {', '.join(dup)}; give one topic per stream")
 
+    field_map = parse_field_map(f"{k}={v}" for k, v in (fields or {}).items())
+    prefer = _preferred(field_map)
     start = time.perf_counter()
     result = ImportResult(final, root / "calib")
     partial = root / f".{run_name}.partial"
+    reader = _open_reader(bag)
     try:
-        reader = AnyReader(paths)
-        reader.open()
-    except Exception as exc:  # rosbags raises its own error types for unreadable bags
-        if isinstance(exc, ColoradarError):
-            raise
-        raise FormatError(f"{bag}: not a readable ROS bag ({exc})") from None
-    try:
+        if not sum(c.msgcount for c in reader.connections):
+            listed = sorted({c.topic for c in reader.connections})
+            raise MissingDataError(f"{bag}: an empty bag: no messages"
+                                   + (f" (topics: {', '.join(listed)})" if listed else ""))
         by_topic = {c.topic: c for c in reader.connections}
         conns = []
         for topic, stream in topic_map.items():
@@ -804,6 +918,16 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
         if not conns:
             raise MissingDataError(f"{bag}: none of the mapped topics ({', '.join(topic_map)}) is "
                                    f"in the bag (it has: {', '.join(sorted(by_topic)) or 'nothing'})")
+        data_conns = [c for c in conns if topic_map[c.topic] != "tf_static"]
+        if not any(c.msgcount for c in data_conns):
+            raise MissingDataError(
+                f"{bag}: no message on the mapped topics "
+                f"{', '.join(c.topic for c in data_conns) or '(only /tf_static)'}; the bag's "
+                f"messages are on: {', '.join(sorted(c.topic for c in reader.connections if c.msgcount))}")
+        for c in data_conns:
+            if not c.msgcount:
+                warnings.warn(f"{bag}: topic {c.topic} ({topic_map[c.topic]}) has no messages; "
+                              "that stream is not imported", DataWarning, stacklevel=2)
         if partial.exists():
             shutil.rmtree(partial)
         partial.mkdir(parents=True)
@@ -812,11 +936,16 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
         rows: dict[str, list[np.ndarray]] = {}
         frame_ids: dict[str, str] = {}
         edges: dict[str, tuple[str, SE3]] = {}
-        for done, (conn, bag_ns, raw) in enumerate(reader.messages(connections=conns), start=1):
+        cloud_fields: dict[str, tuple[str, ...]] = {}   # topic -> fields of its first message
+        for done, (conn, bag_ns, raw) in enumerate(_messages(reader, conns, bag), start=1):
             stream = topic_map[conn.topic]
-            msg = reader.deserialize(raw, conn.msgtype)
+            try:
+                msg = reader.deserialize(raw, conn.msgtype)
+            except Exception as exc:  # rosbags' own error types: a damaged message
+                raise FormatError(f"{bag}: a {conn.msgtype} message on {conn.topic} (bag time "
+                                  f"{bag_ns} ns) cannot be decoded ({exc})") from None
             if stream == "tf_static":
-                for tr in msg.transforms:  # type: ignore[attr-defined]
+                for tr in msg.transforms:
                     tt, q = tr.transform.translation, tr.transform.rotation
                     edges[tr.child_frame_id] = (tr.header.frame_id, SE3(
                         Rotation.from_quat([q.x, q.y, q.z, q.w]), np.array([tt.x, tt.y, tt.z])))
@@ -824,25 +953,37 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
             stamp = _stamp(msg) if time_source == "header" else divmod(int(bag_ns), 1_000_000_000)
             k = len(times.setdefault(stream, []))
             times[stream].append(stamp)
-            frame_ids.setdefault(stream, getattr(msg.header, "frame_id", ""))  # type: ignore[attr-defined]
+            frame_ids.setdefault(stream, getattr(msg.header, "frame_id", ""))
             if _kind(stream) == "cloud":
                 what = f"{bag}: {conn.topic} message {k}"
+                layout = _layout(msg)
+                if conn.topic not in cloud_fields:
+                    cloud_fields[conn.topic] = layout.names
+                    _check_cloud_fields(bag, conn.topic, stream, layout.names, prefer)
                 if stream == "lidar/pointclouds":
-                    pts = decode_cloud(_layout(msg), msg.data, LIDAR_FIELDS,  # type: ignore[attr-defined]
-                                       aliases=FIELD_ALIASES, optional=("intensity",), what=what)
+                    pts = decode_cloud(layout, msg.data, LIDAR_FIELDS,
+                                       aliases=FIELD_ALIASES, optional=("intensity",), what=what,
+                                       prefer=prefer)
                     write_lidar_pointcloud(partial / _frame_rel(stream, k), pts)
                 else:
-                    pts = decode_cloud(_layout(msg), msg.data, RADAR_FIELDS,  # type: ignore[attr-defined]
+                    pts = decode_cloud(layout, msg.data, RADAR_FIELDS,
                                        aliases=FIELD_ALIASES, optional=("intensity", "doppler"),
-                                       what=what)
+                                       what=what, prefer=prefer)
+                    if flip_range_rate:
+                        pts[:, 4] = -pts[:, 4]
                     write_radar_pointcloud(partial / _frame_rel(stream, k), pts)
             elif stream == "imu":
-                a, w = msg.linear_acceleration, msg.angular_velocity  # type: ignore[attr-defined]
+                a, w = msg.linear_acceleration, msg.angular_velocity
                 rows.setdefault(stream, []).append(np.array([a.x, a.y, a.z, w.x, w.y, w.z]))
             else:
                 rows.setdefault(stream, []).append(_pose_row(msg))
             if progress is not None:
                 progress(done, total)
+        for key, fname in field_map.items():
+            if cloud_fields and not any(fname in names for names in cloud_fields.values()):
+                found_fields = "; ".join(f"{t}: {', '.join(n)}" for t, n in cloud_fields.items())
+                raise FormatError(f"{bag}: no point-cloud topic has the field {fname!r} given "
+                                  f"for {key} (fields found: {found_fields})")
     except BaseException:
         if partial.exists():
             shutil.rmtree(partial)
@@ -851,9 +992,11 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
         reader.close()
 
     try:
+        spans = {}
         for stream, stamps in times.items():
             arr = np.array(stamps, dtype=np.int64).reshape(-1, 2)
             t = ns_to_times(arr[:, 0], arr[:, 1])
+            spans[stream] = (float(t.min()), float(t.max()))
             if t.size > 1 and np.any(np.diff(t) <= 0):
                 warnings.warn(f"{bag}: {stream} times do not always increase (kept in bag order)",
                               DataWarning, stacklevel=2)
@@ -867,6 +1010,16 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
                     first = SE3.from_pose(poses[0]).inverse()
                     poses = np.array([(first @ SE3.from_pose(p)).as_pose() for p in poses])
                 write_poses(partial / COLORADAR.tables[stream].path, poses)
+        result.disjoint = _disjoint_streams(spans)
+        if result.disjoint:
+            t0 = min(a for a, _ in spans.values())
+            other_time = "--time bag" if time_source == "header" else "--time header"
+            shown = ", ".join(f"{s} {a - t0:.3f}..{b - t0:.3f} s" for s, (a, b) in spans.items())
+            warnings.warn(f"{bag}: streams that do not overlap in time: "
+                          f"{'; '.join(' and '.join(p) for p in result.disjoint)} (spans after "
+                          f"the first message: {shown}); they cannot be associated by time "
+                          f"(other clocks? try {other_time})",
+                          DataWarning, stacklevel=2)
         (partial / ".coloradar_import").write_text(f"imported from {bag}\n", encoding="utf-8")
         # Extrinsics: each stream's frame, plus any tf frame named like a coloradar sensor.
         sensor_frames = {_sensor(s): f for s, f in frame_ids.items() if f and _sensor(s)}
@@ -907,6 +1060,29 @@ def import_bag(bag: str | os.PathLike[str], out: str | os.PathLike[str], *,
     return result
 
 
+def _check_cloud_fields(bag: Path, topic: str, stream: str, names: tuple[str, ...],
+                        prefer: Mapping[str, str]) -> None:
+    """Say (DataWarning) which point columns of a topic will be zeros for want of a field."""
+    wanted = ("intensity",) if stream == "lidar/pointclouds" else ("intensity", "doppler")
+    missing = [c for c in wanted
+               if not any(n in names for n in (prefer.get(c, c), c, *FIELD_ALIASES.get(c, ())))]
+    if not missing:
+        return
+    cols = ["range_rate" if c == "doppler" else c for c in missing]
+    hint = " ".join(f"--field {c}=NAME" for c in cols)
+    warnings.warn(f"{bag}: topic {topic} has no field for {' or '.join(cols)} (its fields: "
+                  f"{', '.join(names) or 'none'}), so {' and '.join(cols)} "
+                  f"{'is' if len(cols) == 1 else 'are'} imported as zeros; name the fields with "
+                  f"{hint} (fields= in Python)", DataWarning, stacklevel=3)
+
+
+def _disjoint_streams(spans: Mapping[str, tuple[float, float]]) -> list[tuple[str, str]]:
+    """Pairs of streams whose time spans do not overlap (a single sample counts as a point)."""
+    keys = list(spans)
+    return [(a, b) for i, a in enumerate(keys) for b in keys[i + 1:]
+            if spans[a][1] < spans[b][0] or spans[b][1] < spans[a][0]]
+
+
 def _sensor(stream: str) -> str:
     return {"lidar/pointclouds": "lidar", "cascade/pointclouds": "cascade",
             "single_chip/pointclouds": "single_chip", "imu": "imu"}.get(stream, "")
@@ -925,11 +1101,13 @@ def _frame_rel(stream: str, k: int) -> str:
 def iter_topics(bag: str | os.PathLike[str]) -> Iterator[tuple[str, str, int]]:
     """``(topic, message type, count)`` of every connection in a bag (for ``--list``)."""
     _rosbags()
-    from rosbags.highlevel import AnyReader
-
-    with AnyReader(_bag_paths(Path(bag))) as reader:
-        for topic, info in sorted(reader.topics.items()):
-            yield topic, str(info.msgtype), int(info.msgcount)
+    reader = _open_reader(Path(bag))
+    try:
+        listed = [(topic, str(info.msgtype), int(info.msgcount))
+                  for topic, info in sorted(reader.topics.items())]
+    finally:
+        reader.close()
+    yield from listed
 
 
 def _differing_extrinsics(calib_path: Path, found: Mapping[str, Extrinsic]) -> list[str]:
