@@ -14,6 +14,13 @@ def add_file_output_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
 
 
+def add_quiet_arg(p: argparse.ArgumentParser) -> None:
+    """``--quiet``: no progress line and no summary; warnings and errors are still printed
+    (on stderr), so that nothing a user must know is hidden."""
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress or summary lines (warnings and errors still show)")
+
+
 def new_output_file(out: str, overwrite: bool) -> Path:
     """``out`` as a path, refusing an existing file unless ``overwrite`` (checked before any
     input is read, so that a long command fails at once)."""

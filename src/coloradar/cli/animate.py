@@ -6,7 +6,7 @@ import argparse
 
 from ..dataset import open_sequence
 from ..progress import Progress
-from ._common import add_file_output_args, new_output_file
+from ._common import add_file_output_args, add_quiet_arg, new_output_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--extent", type=float, default=20.0, help="half-width of the view [m]")
     p.add_argument("--dpi", type=int, default=100, help="resolution (default 100: 800x720 px)")
     add_file_output_args(p)
+    add_quiet_arg(p)
     p.set_defaults(func=run)
 
 
@@ -41,11 +42,13 @@ def run(args: argparse.Namespace) -> int:
         from ..viz.rerun_log import log_run_rrd
 
         log_run_rrd(seq, out, start=args.start, duration=args.duration,
-                    overwrite=args.overwrite, progress=Progress(0, "recording"))
-        print(f"{out}: {seq.name} from {args.start:g} s (open with: rerun {out})")
+                    overwrite=args.overwrite, progress=Progress(0, "recording", enabled=not args.quiet))
+        if not args.quiet:
+            print(f"{out}: {seq.name} from {args.start:g} s (open with: rerun {out})")
         return 0
     animate_run(seq, out, start=args.start, duration=args.duration, fps=args.fps,
                 frame=args.coords, view=args.view, extent=args.extent, dpi=args.dpi,
-                overwrite=args.overwrite, progress=Progress(0, "pictures"))
-    print(f"{out}: {seq.name} from {args.start:g} s")
+                overwrite=args.overwrite, progress=Progress(0, "pictures", enabled=not args.quiet))
+    if not args.quiet:
+        print(f"{out}: {seq.name} from {args.start:g} s")
     return 0

@@ -6,7 +6,7 @@ import argparse
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ._common import add_file_output_args
+from ._common import add_file_output_args, add_quiet_arg
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--view", required=True,
                    choices=("range-doppler", "range-azimuth", "heatmap", "scene"))
     p.add_argument("--frame", type=int, default=0,
-                   help="frame index (of the radar's stream; for scene, of --stream)")
+                   help="frame index (of the radar's stream; for scene, of --stream; "
+                        "default: %(default)s, the first)")
     p.add_argument("--out", required=True, help="output image (.png, .pdf, .svg)")
     p.add_argument("--radar", choices=RADARS,
                    help="which radar (default: cascade; for scene, both radars; a radar named "
@@ -39,6 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-range", type=float, help="clip the range axis [m]")
     p.add_argument("--dpi", type=int, default=100, help="image resolution (default 100)")
     add_file_output_args(p)
+    add_quiet_arg(p)
     p.set_defaults(func=run)
 
 
@@ -54,5 +56,6 @@ def run(args: argparse.Namespace) -> int:
     fig.set_dpi(args.dpi)
     save_figure(fig, out, overwrite=args.overwrite)
     w, h = fig.canvas.get_width_height()
-    print(f"{out}: {args.view} of {seq.name} frame {args.frame} ({w}x{h} px)")
+    if not args.quiet:
+        print(f"{out}: {args.view} of {seq.name} frame {args.frame} ({w}x{h} px)")
     return 0
