@@ -9,7 +9,14 @@ from ..dataset import open_sequence
 from ..geometry import MAP_SOURCES, build_map, write_point_file
 from ..geometry.cloud_io import check_point_file_name
 from ..progress import Progress
-from ._common import add_file_output_args, add_quiet_arg, new_output_file
+from ._common import (
+    add_file_output_args,
+    add_quiet_arg,
+    new_output_file,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,14 +33,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output folder of 'coloradar process' for this run: radar point "
                         "clouds are read from it (default: the radar's own point clouds, or "
                         "computed from its ADC frames when it has none, as the cascade)")
-    p.add_argument("--start", type=float, default=0.0,
+    p.add_argument("--start", type=non_negative_float, default=0.0,
                    help="window start, seconds after the first ground-truth pose (default 0)")
-    p.add_argument("--duration", type=float, help="window length in seconds (default: to the end)")
-    p.add_argument("--voxel", type=float, help="voxel size in metres for down-sampling")
-    p.add_argument("--stride", type=int, default=1, help="use every N-th frame (default 1)")
-    p.add_argument("--min-range", type=float, default=0.0,
+    p.add_argument("--duration", type=positive_float, help="window length in seconds (default: to the end)")
+    p.add_argument("--voxel", type=positive_float, help="voxel size in metres for down-sampling")
+    p.add_argument("--stride", type=positive_int, default=1, help="use every N-th frame (default 1)")
+    p.add_argument("--min-range", type=non_negative_float, default=0.0,
                    help="drop points closer to the sensor than this [m] (the rig itself)")
-    p.add_argument("--max-range", type=float, help="drop points farther than this [m]")
+    p.add_argument("--max-range", type=positive_float, help="drop points farther than this [m]")
     p.add_argument("--ascii", action="store_true", help="write ascii instead of binary")
     add_file_output_args(p)
     add_quiet_arg(p)

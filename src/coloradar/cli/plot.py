@@ -6,7 +6,7 @@ import argparse
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ._common import add_file_output_args, add_quiet_arg
+from ._common import add_file_output_args, add_quiet_arg, positive_float, positive_int
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -32,13 +32,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scene-view", default="bev", choices=("bev", "3d"),
                    help="scene: bird's-eye (default) or 3-D")
     p.add_argument("--stream", help="scene: the stream --frame counts in (e.g. lidar/pointclouds)")
-    p.add_argument("--extent", type=float, default=20.0, help="scene half-width [m]")
+    p.add_argument("--extent", type=positive_float, default=20.0, help="scene half-width [m]")
     p.add_argument("--polar", action="store_true",
                    help="range-azimuth on azimuth/range axes instead of a bird's-eye view")
     p.add_argument("--slice", default="azimuth-range",
                    choices=("azimuth-range", "elevation-azimuth"), help="heatmap slice")
-    p.add_argument("--max-range", type=float, help="clip the range axis [m]")
-    p.add_argument("--dpi", type=int, default=100, help="image resolution (default 100)")
+    p.add_argument("--max-range", type=positive_float, help="clip the range axis [m]")
+    p.add_argument("--dpi", type=positive_int, default=100, help="image resolution (default 100)")
     add_file_output_args(p)
     add_quiet_arg(p)
     p.set_defaults(func=run)
