@@ -47,8 +47,14 @@ def _read_timestamps_text(src: Source, rel: str) -> str:
 def _line_numbers(text: str) -> np.ndarray:
     """1-based line number of each value row of a table file (blank and ``#`` lines hold none,
     as for :func:`numpy.loadtxt`)."""
+    body = text.rstrip()
+    if not _SKIPPED_LINE.search(body):  # the usual file: row k is line k (found in C)
+        return np.arange(1, body.count("\n") + 2 if body else 1, dtype=np.int64)
     return np.array([i for i, ln in enumerate(text.splitlines(), start=1)
                      if ln.split("#", 1)[0].strip()], dtype=np.int64)
+
+
+_SKIPPED_LINE = re.compile(r"^[ \t\r\f\v]*(#|$)", re.MULTILINE)
 
 
 def _lines_text(lines: np.ndarray, limit: int = 5) -> str:
