@@ -167,6 +167,9 @@ def test_empty_timestamps_beside_frame_files_is_an_error(copy, tmp_path, capsys)
     assert str(ts_file) in line[0] and "3 frame_<i>.bin frame files" in line[0]
     code, out, _ = _cli(["info", copy / RUN], capsys)
     assert code == 1 and "no timestamps" in out
+    ts_file.write_text("nan\nnan\nnan\n")             # as good as none
+    with pytest.raises(FormatError, match="none of its 3 timestamps is a finite time"):
+        cr.open_sequence(copy / RUN).cascade.adc
 
 
 # --- calibration that is not the run's own --------------------------------------------------------

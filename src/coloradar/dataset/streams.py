@@ -281,7 +281,8 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
     file and files without a timestamp are left out with a :class:`DataWarning` (and noted in
     ``issues``). A timestamp that is not a finite number leaves its frame out, and duplicated or
     decreasing timestamps are kept, each with a :class:`DataWarning` naming the file and lines
-    (and noted in ``timestamp_faults``). An empty timestamps file beside frame files is a
+    (and noted in ``timestamp_faults``). Frame files of which none has a finite timestamp (an
+    empty timestamps file, one of all ``nan``, one numbered for other files) are a
     :class:`FormatError`: no frame of the stream can be placed in time.
     """
     ts_rel = f"{folder}/{timestamps}"
@@ -302,8 +303,12 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
     base = first_frame if matches[0] == matches[1] else max(matches, key=matches.__getitem__)
     wanted = base + np.arange(ts.size, dtype=np.int64)
     has = np.isin(wanted, ids_arr)
-    if ts.size == 0 and ids_arr.size:
-        raise FormatError(f"{src.describe(ts_rel)}: no timestamps, but {src.describe(data_dir)} "
+    if ids_arr.size and not np.isfinite(ts[has]).any():
+        # Every frame would be left out: a stream that reads as empty would let a command say
+        # "nothing to do" over frames that are there.
+        what = ("no timestamps" if ts.size == 0 else
+                f"none of its {ts.size} timestamps is a finite time of one of the frame files")
+        raise FormatError(f"{src.describe(ts_rel)}: {what}, but {src.describe(data_dir)} "
                           f"holds {ids_arr.size} {prefix}_<i>.bin frame files (expected one "
                           "timestamp per frame, Unix seconds, one per line)")
     issues = []
