@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import ColoradarError, OutputExistsError
+from ..errors import OutputExistsError
 from ..progress import StageProgress
+from ._common import UsageError, positive_float
 
 __all__ = ["register", "run"]
 
@@ -26,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", default="corridor",
                    help=f"built-in scene ({', '.join(SCENES)}) or a scene .json file "
                         "(default: corridor)")
-    p.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
+    p.add_argument("--duration", type=positive_float, default=10.0, help="seconds (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0); also the run "
                    "number in the run's name")
     p.add_argument("--motion", choices=list(MOTION_PROFILES), default="smooth",
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out is None:
             return 0
     if args.out is None:
-        raise ColoradarError("give an output folder OUT (or --write-scene FILE)")
+        raise UsageError("give an output folder OUT (or --write-scene FILE)")
     sensors: list[str] | None = [s.strip() for s in args.sensors.split(",") if s.strip()]
     if args.sensors == ",".join(SENSOR_CHOICES):
         sensors = None                  # the default: every sensor of the layout

@@ -24,6 +24,7 @@ from .frames import (
 from .mapping import (
     MAP_SOURCES,
     PointMap,
+    VoxelAccumulator,
     accumulate_clouds,
     build_map,
     voxel_downsample,
@@ -40,6 +41,7 @@ __all__ = [
     "PointMap",
     "RigVelocity",
     "Trajectory",
+    "VoxelAccumulator",
     "accumulate_clouds",
     "associate",
     "build_map",
