@@ -1,21 +1,79 @@
 """Compiled kernels used when numba is installed (engine ``"numba"``, :mod:`coloradar.dsp.heatmap`).
 
 Imported only when numba is installed (``pip install coloradar[accel]``). The functions live at
-module level so that numba's on-disk cache (``cache=True``) finds them again in every new
-process instead of compiling for seconds each time.
+module level so that numba's on-disk cache finds them again in every new process instead of
+compiling for seconds each time.
+
+Where numba finds no writable cache folder (a service account, a read-only container: the
+package folder read-only and ``NUMBA_CACHE_DIR`` unset or unwritable), numba refuses
+``cache=True`` at import with ``RuntimeError: cannot cache function … no locator available``.
+The kernels are then compiled without a cache (in every process) and one
+:class:`RuntimeWarning` says so. Whenever a kernel is not in the cache yet, one line on stderr
+says that the first frame compiles them (a few seconds), instead of a silent pause.
 """
 
 from __future__ import annotations
 
+import sys
+import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numba
 import numpy as np
 
-__all__ = ["peak_over_doppler"]
+__all__ = ["CACHE_PROBLEM", "gather_rows", "peak_over_doppler", "prepare_chirps"]
+
+CACHE_PROBLEM: str | None = None
+"""Why the kernels are not cached on disk in this process (None: they are)."""
+
+_CACHED: list[Any] = []          # the dispatchers compiled with cache=True
 
 
-@numba.njit(cache=True, fastmath={"contract", "nnan"}, nogil=True)
+def _jit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
+    """``numba.njit(cache=True, **options)``, or without the cache where numba has no folder
+    to write it to (then :data:`CACHE_PROBLEM` says why)."""
+    def wrap(fn: Callable[..., Any]) -> Any:
+        global CACHE_PROBLEM
+        if CACHE_PROBLEM is None:
+            try:
+                disp = numba.njit(cache=True, **options)(fn)
+            except RuntimeError as exc:          # "cannot cache function …: no locator available"
+                if "cannot cache" not in str(exc):
+                    raise
+                CACHE_PROBLEM = str(exc)
+            else:
+                _CACHED.append(disp)
+                return disp
+        return numba.njit(**options)(fn)
+    return wrap
+
+
+def _is_cached(disp: Any) -> bool:
+    """Whether ``disp`` has an overload for this machine in its on-disk cache (numba's cache
+    index, read through its internals: any failure counts as "not cached")."""
+    try:
+        magic = disp.targetctx.codegen().magic_tuple()
+        index = disp._cache._cache_file._load_index()
+        return any(key[1] == magic for key in index)
+    except Exception:                                # numba internals differ: assume a compile
+        return False
+
+
+def _announce() -> None:
+    """One warning when there is no cache; one stderr line when the first frame will compile."""
+    if CACHE_PROBLEM is not None:
+        warnings.warn("coloradar: numba finds no writable folder for its cache (set "
+                      "NUMBA_CACHE_DIR to a writable folder to keep the compiled kernels); the "
+                      "DSP kernels are compiled again in every process (a few seconds on the "
+                      f"first frame). numba said: {CACHE_PROBLEM}", RuntimeWarning, stacklevel=2)
+        return
+    if not all(_is_cached(d) for d in _CACHED):
+        print("coloradar: compiling the numba DSP kernels on the first frame (a few seconds, "
+              "once: they are cached on disk)", file=sys.stderr, flush=True)
+
+
+@_jit(fastmath={"contract", "nnan"}, nogil=True)
 def _update(best: Any, arg: Any, d: Any, vr: Any, vi: Any) -> None:  # pragma: no cover
     for a in range(best.size):
         p = vr[a] * vr[a] + vi[a] * vi[a]
@@ -25,7 +83,7 @@ def _update(best: Any, arg: Any, d: Any, vr: Any, vi: Any) -> None:  # pragma: n
 
 # "nnan" (inputs are finite: ADC counts) lets LLVM turn the running maximum into vector
 # max/blend instructions; without it the comparisons stay scalar and cost half the kernel.
-@numba.njit(cache=True, fastmath={"contract", "nnan"}, nogil=True)
+@_jit(fastmath={"contract", "nnan"}, nogil=True)
 def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus: Any,
                       az_read: Any, velocities: Any, scale: float, out: Any,
                       r0: int) -> None:  # pragma: no cover - compiled
@@ -135,7 +193,7 @@ def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus
                     out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
 
 
-@numba.njit(cache=True, nogil=True)
+@_jit(nogil=True)
 def gather_rows(cube: Any, channels: Any, row_of: Any, az_pos: Any, r0: int,
                 buf: Any) -> None:  # pragma: no cover - compiled
     """``buf[row_of[m], i, d, az_pos[m]] = cube[channels[m], d, r0 + i]`` for a range chunk.
@@ -152,7 +210,7 @@ def gather_rows(cube: Any, channels: Any, row_of: Any, az_pos: Any, r0: int,
                 buf[q, i, d, a] = src[d, r0 + i]
 
 
-@numba.njit(cache=True, nogil=True, fastmath={"contract"})
+@_jit(nogil=True, fastmath={"contract"})
 def prepare_chirps(adc: Any, coupling: Any, gain: Any, chirp_weight: Any, dc_removal: bool,
                    out: Any) -> None:  # pragma: no cover - compiled
     """``out[t, r, c, :ns] = (adc − coupling − mean_n(adc − coupling)) · gain[t, r] · w[c]``.
@@ -197,3 +255,6 @@ def prepare_chirps(adc: Any, coupling: Any, gain: Any, chirp_weight: Any, dc_rem
                     gi = g[2 * n + 1] * w
                     y[2 * n] = vr * gr - vi * gi
                     y[2 * n + 1] = vr * gi + vi * gr
+
+
+_announce()

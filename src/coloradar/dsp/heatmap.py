@@ -35,6 +35,7 @@ explicit steering vectors for both radars and both signs.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -64,6 +65,12 @@ def _numba_kernel() -> Callable[..., None] | None:
         from ._kernels import peak_over_doppler
     except ImportError as exc:                      # numba is an optional extra
         _KERNEL_ERROR = str(exc)
+        return None
+    except Exception as exc:                        # a broken numba install: never crash
+        _KERNEL_ERROR = f"{type(exc).__name__}: {exc}"
+        warnings.warn(f"coloradar: numba is installed but its kernels failed to load "
+                      f"({_KERNEL_ERROR}); using the numpy heatmap engine", RuntimeWarning,
+                      stacklevel=2)
         return None
     _KERNEL = peak_over_doppler
     return _KERNEL
