@@ -22,7 +22,8 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["CACHE_PROBLEM", "gather_rows", "peak_over_doppler", "prepare_chirps"]
+__all__ = ["CACHE_PROBLEM", "gather_rows", "peak_over_doppler", "peak_over_doppler_dft",
+           "prepare_chirps"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -73,7 +74,10 @@ def _announce() -> None:
               "once: they are cached on disk)", file=sys.stderr, flush=True)
 
 
-@_jit(fastmath={"contract", "nnan"}, nogil=True)
+_FM = {"contract", "nnan"}
+
+
+@numba.njit(inline="always", fastmath=_FM)
 def _update(best: Any, arg: Any, d: Any, vr: Any, vi: Any) -> None:  # pragma: no cover
     for a in range(best.size):
         p = vr[a] * vr[a] + vi[a] * vi[a]
@@ -81,19 +85,106 @@ def _update(best: Any, arg: Any, d: Any, vr: Any, vi: Any) -> None:  # pragma: n
         arg[a] = d if p > b else arg[a]              # first maximum wins, as argmax
         best[a] = max(b, p)
 
+
 # "nnan" (inputs are finite: ADC counts) lets LLVM turn the running maximum into vector
 # max/blend instructions; without it the comparisons stay scalar and cost half the kernel.
-@_jit(fastmath={"contract", "nnan"}, nogil=True)
-def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus: Any,
-                      az_read: Any, velocities: Any, scale: float, out: Any,
-                      r0: int) -> None:  # pragma: no cover - compiled
-    # Azimuth is the innermost loop (contiguous, vectorised); the elevation DFT over the
-    # occupied rows, the power and the running Doppler maximum stay in registers.
+@numba.njit(inline="always", fastmath=_FM)
+def _elevate(xr: Any, xi: Any, sr: Any, si: Any, n_even: int, peak_p: Any, bins_p: Any,
+             peak_m: Any, bins_m: Any, r: int, dd: Any, er: Any, ei: Any, o_r: Any,
+             o_i: Any) -> None:  # pragma: no cover - compiled
+    # One Doppler bin of range bin r: the elevation DFT of the occupied rows' azimuth
+    # spectra xr + j·xi ``(rows, naz)``, its power and the running maximum over Doppler
+    # (``peak``/``bins`` ``(n, n_st, naz)``). Azimuth is the innermost loop (contiguous,
+    # vectorised); beam values, power and comparison stay in registers.
     # Paired (n_even >= 0): steering row p gives elevation bin el_plus[p] as E + O and
     # el_minus[p] (FFT index + n/2) as E − O, E/O the sums over even/odd rows (rows
     # sorted even first). Unpaired (n_even < 0): row p gives bin el_plus[p] only.
+    # Row 0 sits at elevation position 0 in the specialised paths: its steering is 1.
+    # Arrays are indexed in full, never sliced, in these loops: each slice of an array
+    # costs numba two reference-count calls, more than the loop over azimuth itself.
     # The + and − maxima live in separate arrays: LLVM vectorises the loop only when it
     # can tell the stores apart.
+    rows, naz = xr.shape
+    n_st = sr.shape[0]
+    if rows == 4 and n_even == 3 and sr[0, 0] == 1.0 and si[0, 0] == 0.0:
+        # the cascade: rows 0, 4, 6 | 1
+        for e in range(n_st):
+            c1r, c1i, c2r, c2i = sr[e, 1], si[e, 1], sr[e, 2], si[e, 2]
+            c3r, c3i = sr[e, 3], si[e, 3]
+            for a in range(naz):
+                vr = (xr[0, a] + c1r * xr[1, a] - c1i * xi[1, a] + c2r * xr[2, a]
+                      - c2i * xi[2, a])
+                vi = (xi[0, a] + c1r * xi[1, a] + c1i * xr[1, a] + c2r * xi[2, a]
+                      + c2i * xr[2, a])
+                wr = c3r * xr[3, a] - c3i * xi[3, a]
+                wi = c3r * xi[3, a] + c3i * xr[3, a]
+                p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
+                b = peak_p[r, e, a]
+                bins_p[r, e, a] = dd if p > b else bins_p[r, e, a]  # first max wins (argmax)
+                peak_p[r, e, a] = max(b, p)
+                p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
+                b = peak_m[r, e, a]
+                bins_m[r, e, a] = dd if p > b else bins_m[r, e, a]
+                peak_m[r, e, a] = max(b, p)
+    elif rows == 2 and n_even == 1 and sr[0, 0] == 1.0 and si[0, 0] == 0.0:
+        # the single chip: row 0 | 1
+        for e in range(n_st):
+            c1r, c1i = sr[e, 1], si[e, 1]
+            for a in range(naz):
+                vr, vi = xr[0, a], xi[0, a]
+                wr = c1r * xr[1, a] - c1i * xi[1, a]
+                wi = c1r * xi[1, a] + c1i * xr[1, a]
+                p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
+                b = peak_p[r, e, a]
+                bins_p[r, e, a] = dd if p > b else bins_p[r, e, a]
+                peak_p[r, e, a] = max(b, p)
+                p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
+                b = peak_m[r, e, a]
+                bins_m[r, e, a] = dd if p > b else bins_m[r, e, a]
+                peak_m[r, e, a] = max(b, p)
+    else:                                           # any other layout
+        n_e = rows if n_even < 0 else n_even
+        for e in range(n_st):
+            er[:] = 0.0
+            ei[:] = 0.0
+            o_r[:] = 0.0
+            o_i[:] = 0.0
+            for q in range(rows):
+                cr, ci, xqr, xqi = sr[e, q], si[e, q], xr[q], xi[q]
+                ar, ai = (er, ei) if q < n_e else (o_r, o_i)
+                for a in range(naz):
+                    ar[a] += cr * xqr[a] - ci * xqi[a]
+                    ai[a] += cr * xqi[a] + ci * xqr[a]
+            if n_even < 0:
+                _update(peak_p[r, e], bins_p[r, e], dd, er, ei)
+                continue
+            _update(peak_p[r, e], bins_p[r, e], dd, er + o_r, ei + o_i)
+            _update(peak_m[r, e], bins_m[r, e], dd, er - o_r, ei - o_i)
+
+
+@numba.njit(inline="always")
+def _split_steering(steer: Any) -> tuple[Any, Any]:  # pragma: no cover - compiled
+    n_st, rows = steer.shape
+    sr = np.empty((n_st, rows), np.float32)
+    si = np.empty((n_st, rows), np.float32)
+    for e in range(n_st):
+        for q in range(rows):
+            sr[e, q] = steer[e, q].real
+            si[e, q] = steer[e, q].imag
+    return sr, si
+
+
+@_jit(fastmath=_FM, nogil=True)
+def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus: Any,
+                      az_read: Any, velocities: Any, scale: float, out: Any,
+                      r0: int) -> None:  # pragma: no cover - compiled
+    """Peak over Doppler of a chunk of range bins from their azimuth spectra.
+
+    ``spec`` complex64 ``(rows, n, doppler, naz)``: azimuth FFT of the occupied elevation
+    rows of ``n`` range bins from ``r0``; ``steer`` complex64 ``(n_st, rows)``; writes
+    ``out[:, :, r0:r0 + n]`` (``(num_el, num_az, range, 2)``, see
+    :func:`coloradar.dsp.heatmap.heatmap_from_elements`).
+    """
     rows, n, nd, naz = spec.shape
     n_st = steer.shape[0]
     n_out = out.shape[1]
@@ -107,12 +198,7 @@ def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus
     ei = np.empty(naz, np.float32)
     o_r = np.empty(naz, np.float32)
     o_i = np.empty(naz, np.float32)
-    sr = np.empty((n_st, rows), np.float32)
-    si = np.empty((n_st, rows), np.float32)
-    for e in range(n_st):
-        for q in range(rows):
-            sr[e, q] = steer[e, q].real
-            si[e, q] = steer[e, q].imag
+    sr, si = _split_steering(steer)
     peak_p[:] = -1.0
     peak_m[:] = -1.0
     bins_p[:] = 0
@@ -120,67 +206,12 @@ def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus
     for r in range(n):
         for d in range(nd):
             for q in range(rows):               # de-interleave once, use n_st times
-                s, xrq, xiq = spec[q, r, d], xr[q], xi[q]
                 for a in range(naz):
-                    xrq[a] = s[a].real
-                    xiq[a] = s[a].imag
-            dd = np.int32(d)
-            x0r, x0i = xr[0], xi[0]
-            if rows == 4 and n_even == 3:       # the cascade (rows 0, 4, 6 | 1)
-                x1r, x1i, x2r, x2i, x3r, x3i = xr[1], xi[1], xr[2], xi[2], xr[3], xi[3]
-                for e in range(n_st):
-                    c0r, c0i, c1r, c1i = sr[e, 0], si[e, 0], sr[e, 1], si[e, 1]
-                    c2r, c2i, c3r, c3i = sr[e, 2], si[e, 2], sr[e, 3], si[e, 3]
-                    for a in range(naz):
-                        vr = (c0r * x0r[a] - c0i * x0i[a] + c1r * x1r[a] - c1i * x1i[a]
-                              + c2r * x2r[a] - c2i * x2i[a])
-                        vi = (c0r * x0i[a] + c0i * x0r[a] + c1r * x1i[a] + c1i * x1r[a]
-                              + c2r * x2i[a] + c2i * x2r[a])
-                        wr = c3r * x3r[a] - c3i * x3i[a]
-                        wi = c3r * x3i[a] + c3i * x3r[a]
-                        p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
-                        b = peak_p[r, e, a]
-                        bins_p[r, e, a] = dd if p > b else bins_p[r, e, a]  # first max wins (argmax)
-                        peak_p[r, e, a] = max(b, p)
-                        p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
-                        b = peak_m[r, e, a]
-                        bins_m[r, e, a] = dd if p > b else bins_m[r, e, a]
-                        peak_m[r, e, a] = max(b, p)
-            elif rows == 2 and n_even == 1:     # the single chip (row 0 | 1)
-                x1r, x1i = xr[1], xi[1]
-                for e in range(n_st):
-                    c0r, c0i, c1r, c1i = sr[e, 0], si[e, 0], sr[e, 1], si[e, 1]
-                    for a in range(naz):
-                        vr = c0r * x0r[a] - c0i * x0i[a]
-                        vi = c0r * x0i[a] + c0i * x0r[a]
-                        wr = c1r * x1r[a] - c1i * x1i[a]
-                        wi = c1r * x1i[a] + c1i * x1r[a]
-                        p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
-                        b = peak_p[r, e, a]
-                        bins_p[r, e, a] = dd if p > b else bins_p[r, e, a]
-                        peak_p[r, e, a] = max(b, p)
-                        p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
-                        b = peak_m[r, e, a]
-                        bins_m[r, e, a] = dd if p > b else bins_m[r, e, a]
-                        peak_m[r, e, a] = max(b, p)
-            else:                               # any other layout
-                n_e = rows if n_even < 0 else n_even
-                for e in range(n_st):
-                    er[:] = 0.0
-                    ei[:] = 0.0
-                    o_r[:] = 0.0
-                    o_i[:] = 0.0
-                    for q in range(rows):
-                        cr, ci, xqr, xqi = sr[e, q], si[e, q], xr[q], xi[q]
-                        ar, ai = (er, ei) if q < n_e else (o_r, o_i)
-                        for a in range(naz):
-                            ar[a] += cr * xqr[a] - ci * xqi[a]
-                            ai[a] += cr * xqi[a] + ci * xqr[a]
-                    if n_even < 0:
-                        _update(peak_p[r, e], bins_p[r, e], dd, er, ei)
-                        continue
-                    _update(peak_p[r, e], bins_p[r, e], dd, er + o_r, ei + o_i)
-                    _update(peak_m[r, e], bins_m[r, e], dd, er - o_r, ei - o_i)
+                    v = spec[q, r, d, a]
+                    xr[q, a] = v.real
+                    xi[q, a] = v.imag
+            _elevate(xr, xi, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, r, np.int32(d),
+                     er, ei, o_r, o_i)
     for half in range(1 if n_even < 0 else 2):  # range is the output's inner axis
         peak, bins, els = (peak_p, bins_p, el_plus) if half == 0 else (peak_m, bins_m,
                                                                        el_minus)
@@ -191,6 +222,68 @@ def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus
                 for r in range(n):
                     out[el, j, r0 + r, 0] = peak[r, e, a] * scale
                     out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
+
+
+@_jit(fastmath=_FM, nogil=True)
+def peak_over_doppler_dft(cube: Any, channels: Any, row_of: Any, tw_r: Any, tw_i: Any,
+                          steer: Any, n_even: int, el_plus: Any, el_minus: Any, az_read: Any,
+                          velocities: Any, scale: float, out: Any,
+                          range_block: int) -> None:  # pragma: no cover - compiled
+    """:func:`peak_over_doppler` for narrow apertures, the azimuth transform done in place.
+
+    Element ``m`` is ``cube[channels[m]]`` (``cube`` complex64 ``(C, doppler, range)``), on
+    occupied row ``row_of[m]``; ``tw_r + j·tw_i`` float32 ``(M, naz)`` holds its azimuth
+    DFT row ``exp(−2πj·az_pos[m]·a/naz)``. For a few elements per row (the single chip: 8
+    and 4) this direct DFT of each range–Doppler cell, kept in cache and fed straight to the
+    elevation stage, costs less than zero padding every cell to ``naz`` for an FFT call.
+    ``range_block`` range bins share one pass of output writes.
+    """
+    nd, nr = cube.shape[1], cube.shape[2]
+    m_all, naz = tw_r.shape
+    rows = steer.shape[1]
+    n_st = steer.shape[0]
+    n_out = out.shape[1]
+    xr = np.empty((rows, naz), np.float32)
+    xi = np.empty((rows, naz), np.float32)
+    nb = range_block
+    peak_p = np.empty((nb, n_st, naz), np.float32)
+    bins_p = np.empty((nb, n_st, naz), np.int32)
+    peak_m = np.empty((nb, n_st, naz), np.float32)
+    bins_m = np.empty((nb, n_st, naz), np.int32)
+    er = np.empty(naz, np.float32)
+    ei = np.empty(naz, np.float32)
+    o_r = np.empty(naz, np.float32)
+    o_i = np.empty(naz, np.float32)
+    sr, si = _split_steering(steer)
+    for r0 in range(0, nr, nb):
+        n = min(nb, nr - r0)
+        peak_p[:] = -1.0
+        peak_m[:] = -1.0
+        bins_p[:] = 0
+        bins_m[:] = 0
+        for r in range(n):
+            for d in range(nd):
+                xr[:] = 0.0
+                xi[:] = 0.0
+                for m in range(m_all):
+                    v = cube[channels[m], d, r0 + r]
+                    vr, vi = v.real, v.imag
+                    q = row_of[m]
+                    for a in range(naz):
+                        xr[q, a] += vr * tw_r[m, a] - vi * tw_i[m, a]
+                        xi[q, a] += vr * tw_i[m, a] + vi * tw_r[m, a]
+                _elevate(xr, xi, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, r,
+                         np.int32(d), er, ei, o_r, o_i)
+        for half in range(1 if n_even < 0 else 2):
+            peak, bins, els = (peak_p, bins_p, el_plus) if half == 0 else (peak_m, bins_m,
+                                                                           el_minus)
+            for e in range(n_st):
+                el = els[e]
+                for j in range(n_out):
+                    a = az_read[j]
+                    for r in range(n):
+                        out[el, j, r0 + r, 0] = peak[r, e, a] * scale
+                        out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
 
 
 @_jit(nogil=True)
@@ -211,50 +304,53 @@ def gather_rows(cube: Any, channels: Any, row_of: Any, az_pos: Any, r0: int,
 
 
 @_jit(nogil=True, fastmath={"contract"})
-def prepare_chirps(adc: Any, coupling: Any, gain: Any, chirp_weight: Any, dc_removal: bool,
-                   out: Any) -> None:  # pragma: no cover - compiled
-    """``out[t, r, c, :ns] = (adc − coupling − mean_n(adc − coupling)) · gain[t, r] · w[c]``.
+def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weight: Any,
+                   dc_removal: bool, out: Any) -> None:  # pragma: no cover - compiled
+    """``out[k, c, :ns] = (adc − coupling − mean_n(adc − coupling)) · gain · w[c]`` of channel
+    ``channels[k]``.
 
     All complex arrays are passed as float32 views (re, im interleaved along the last axis),
     which lets LLVM vectorise the loops. One pass over the ADC frame replaces four numpy
-    passes; samples beyond ``ns`` (zero padding) are left untouched.
+    passes; samples beyond ``ns`` (zero padding) are left untouched. ``adc`` is
+    ``(tx, rx, chirp, 2·ns)``; ``channels`` int ``(K,)`` the flat ``tx·num_rx + rx``
+    indices to prepare (all, or only those a heatmap reads); ``out`` ``(K, chirp, 2·nfft)``.
     ``coupling`` is ``(tx, rx, 2·ns)`` or empty (no coupling); ``gain`` ``(tx, rx, 2·ns)``
     (calibration × range window); ``chirp_weight`` ``(chirps,)`` (Doppler window × (−1)^c).
     """
-    ntx, nrx, nc, ns2 = adc.shape
+    nrx, nc, ns2 = adc.shape[1], adc.shape[2], adc.shape[3]
     ns = ns2 // 2
     has_c = coupling.size > 0
-    for t in range(ntx):
-        for r in range(nrx):
-            g = gain[t, r]
-            cp = coupling[t, r] if has_c else g
-            for c in range(nc):
-                x = adc[t, r, c]
-                y = out[t, r, c]
-                if has_c:
-                    for k in range(ns2):
-                        y[k] = x[k] - cp[k]
-                else:
-                    for k in range(ns2):
-                        y[k] = x[k]
-                mr = np.float32(0.0)
-                mi = np.float32(0.0)
-                if dc_removal:
-                    sr = 0.0
-                    si = 0.0
-                    for n in range(ns):
-                        sr += y[2 * n]
-                        si += y[2 * n + 1]
-                    mr = np.float32(sr / ns)
-                    mi = np.float32(si / ns)
-                w = chirp_weight[c]
+    for k in range(channels.size):
+        t, r = channels[k] // nrx, channels[k] % nrx
+        g = gain[t, r]
+        cp = coupling[t, r] if has_c else g
+        for c in range(nc):
+            x = adc[t, r, c]
+            y = out[k, c]
+            if has_c:
+                for i in range(ns2):
+                    y[i] = x[i] - cp[i]
+            else:
+                for i in range(ns2):
+                    y[i] = x[i]
+            mr = np.float32(0.0)
+            mi = np.float32(0.0)
+            if dc_removal:
+                sr = 0.0
+                si = 0.0
                 for n in range(ns):
-                    vr = y[2 * n] - mr
-                    vi = y[2 * n + 1] - mi
-                    gr = g[2 * n] * w
-                    gi = g[2 * n + 1] * w
-                    y[2 * n] = vr * gr - vi * gi
-                    y[2 * n + 1] = vr * gi + vi * gr
+                    sr += y[2 * n]
+                    si += y[2 * n + 1]
+                mr = np.float32(sr / ns)
+                mi = np.float32(si / ns)
+            w = chirp_weight[c]
+            for n in range(ns):
+                vr = y[2 * n] - mr
+                vi = y[2 * n + 1] - mi
+                gr = g[2 * n] * w
+                gi = g[2 * n + 1] * w
+                y[2 * n] = vr * gr - vi * gi
+                y[2 * n + 1] = vr * gi + vi * gr
 
 
 _announce()
