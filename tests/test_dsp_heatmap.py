@@ -67,19 +67,20 @@ def test_engine_matches_definition(name, signs, engine):
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-@pytest.mark.parametrize("num_el", [8, 2])
-def test_engine_on_another_layout(engine, num_el):
+@pytest.mark.parametrize(("num_el", "num_az"), [(8, 32), (2, 32), (8, 24)])
+def test_engine_on_another_layout(engine, num_el, num_az):
     """Three elevation rows (0, 2, 3) and, with 2 bins, an aperture wider than the grid: the
-    kernel's general paths (not the two radars' specialised ones) against explicit steering."""
+    kernel's general paths (not the two radars' specialised ones) against explicit steering.
+    24 azimuth bins (not a power of two) take the numba engine's FFT-call path."""
     _engine_or_skip(engine)
     from coloradar.calib import AntennaConfig
     rx = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
     tx = np.array([[0.0, 0.0], [4.0, 2.0], [1.0, 3.0], [6.0, 0.0]])
     ant = AntennaConfig(77e9, rx, tx)
-    grid = angle_grid(ant, 78e9, num_el, 32)
+    grid = angle_grid(ant, 78e9, num_el, num_az)
     assert (grid.n_el == num_el) == (num_el == 8)
     g = np.random.default_rng(4)
-    m, nd, nr = grid.num_elements, 8, 5
+    m, nd, nr = grid.num_elements, 8, 19       # 19 range bins: a full block of 16 and a partial one
     elements = (g.standard_normal((m, nd, nr)) + 1j * g.standard_normal((m, nd, nr))).astype(
         np.complex64)
     vel = np.arange(nd) - 4.0

@@ -22,8 +22,8 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["CACHE_PROBLEM", "gather_rows", "peak_over_doppler", "peak_over_doppler_dft",
-           "prepare_chirps"]
+__all__ = ["CACHE_PROBLEM", "LANES", "gather_rows", "peak_over_doppler",
+           "peak_over_doppler_planar", "prepare_chirps"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -224,66 +224,128 @@ def peak_over_doppler(spec: Any, steer: Any, n_even: int, el_plus: Any, el_minus
                     out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
 
 
-@_jit(fastmath=_FM, nogil=True)
-def peak_over_doppler_dft(cube: Any, channels: Any, row_of: Any, tw_r: Any, tw_i: Any,
-                          steer: Any, n_even: int, el_plus: Any, el_minus: Any, az_read: Any,
-                          velocities: Any, scale: float, out: Any,
-                          range_block: int) -> None:  # pragma: no cover - compiled
-    """:func:`peak_over_doppler` for narrow apertures, the azimuth transform done in place.
+LANES = 16
+"""Range bins transformed side by side by the planar kernel (one AVX-512 register of float32)."""
 
-    Element ``m`` is ``cube[channels[m]]`` (``cube`` complex64 ``(C, doppler, range)``), on
-    occupied row ``row_of[m]``; ``tw_r + j·tw_i`` float32 ``(M, naz)`` holds its azimuth
-    DFT row ``exp(−2πj·az_pos[m]·a/naz)``. For a few elements per row (the single chip: 8
-    and 4) this direct DFT of each range–Doppler cell, kept in cache and fed straight to the
-    elevation stage, costs less than zero padding every cell to ``naz`` for an FFT call.
-    ``range_block`` range bins share one pass of output writes.
+
+@numba.njit(inline="always", fastmath=_FM)
+def _fft_lanes(src_r: Any, src_i: Any, x_r: Any, x_i: Any, y_r: Any, y_i: Any, w_r: Any,
+               w_i: Any, q: int) -> None:  # pragma: no cover - compiled
+    # FFT over axis 1 of row q of src ``(rows, n, LANES)`` (n a power of two), every lane a
+    # separate transform: Stockham autosort radix 2 (natural order in, natural order out, no
+    # bit reversal), ping-pong y <- src, x <- y, y <- x, ...: the result lies in y after an
+    # odd number of stages, in x after an even one. w = exp(−2πj·t/n), t < n/2. The lane loop
+    # is innermost: every butterfly is one vector operation on 16 range bins.
+    n = src_r.shape[1]
+    half = n // 2
+    m = 1
+    first = True
+    while half >= 1:
+        for j in range(half):
+            wr, wi = w_r[j * m], w_i[j * m]
+            for k in range(m):
+                i0 = k + j * m
+                i1 = i0 + half * m
+                o0 = k + 2 * j * m
+                o1 = o0 + m
+                if first:
+                    for t in range(LANES):
+                        ar, ai, br, bi = src_r[q, i0, t], src_i[q, i0, t], src_r[q, i1, t], \
+                            src_i[q, i1, t]
+                        y_r[q, o0, t] = ar + br
+                        y_i[q, o0, t] = ai + bi
+                        dr, di = ar - br, ai - bi
+                        y_r[q, o1, t] = wr * dr - wi * di
+                        y_i[q, o1, t] = wr * di + wi * dr
+                else:
+                    for t in range(LANES):
+                        ar, ai, br, bi = x_r[q, i0, t], x_i[q, i0, t], x_r[q, i1, t], \
+                            x_i[q, i1, t]
+                        y_r[q, o0, t] = ar + br
+                        y_i[q, o0, t] = ai + bi
+                        dr, di = ar - br, ai - bi
+                        y_r[q, o1, t] = wr * dr - wi * di
+                        y_i[q, o1, t] = wr * di + wi * dr
+        x_r, y_r = y_r, x_r
+        x_i, y_i = y_i, x_i
+        first = False
+        half //= 2
+        m *= 2
+
+
+@_jit(fastmath=_FM, nogil=True)
+def peak_over_doppler_planar(cube: Any, channels: Any, row_of: Any, az_pos: Any, steer: Any,
+                             n_even: int, el_plus: Any, el_minus: Any, az_read: Any,
+                             velocities: Any, scale: float, out: Any, w_r: Any,
+                             w_i: Any) -> None:  # pragma: no cover - compiled
+    """The whole heatmap from the range–Doppler cube, range bins as SIMD lanes.
+
+    Element ``m`` is ``cube[channels[m]]`` (``cube`` complex64 ``(C, doppler, range)``), at
+    occupied row ``row_of[m]`` and azimuth position ``az_pos[m]``. For :data:`LANES` range
+    bins at a time and each Doppler bin: gather the elements into planar (real, imaginary)
+    ``(rows, n_az, LANES)`` buffers, FFT every row along azimuth (``n_az = w_r.size·2``, a
+    power of two) with the lanes innermost, then the elevation stage over the flattened
+    ``(azimuth, lane)`` axis: 2048 contiguous values for the cascade, one long vector loop,
+    no de-interleaving, no zero-padded copies, no FFT calls. Writes ``out``
+    (``(num_el, num_az, range, 2)``).
     """
     nd, nr = cube.shape[1], cube.shape[2]
-    m_all, naz = tw_r.shape
-    rows = steer.shape[1]
-    n_st = steer.shape[0]
+    n_az = 2 * w_r.size
+    n_st, rows = steer.shape
     n_out = out.shape[1]
-    xr = np.empty((rows, naz), np.float32)
-    xi = np.empty((rows, naz), np.float32)
-    nb = range_block
-    peak_p = np.empty((nb, n_st, naz), np.float32)
-    bins_p = np.empty((nb, n_st, naz), np.int32)
-    peak_m = np.empty((nb, n_st, naz), np.float32)
-    bins_m = np.empty((nb, n_st, naz), np.int32)
-    er = np.empty(naz, np.float32)
-    ei = np.empty(naz, np.float32)
-    o_r = np.empty(naz, np.float32)
-    o_i = np.empty(naz, np.float32)
+    flat = n_az * LANES
+    src_r = np.zeros((rows, n_az, LANES), np.float32)       # zeros where no element sits
+    src_i = np.zeros((rows, n_az, LANES), np.float32)
+    a_r = np.empty((rows, n_az, LANES), np.float32)
+    a_i = np.empty((rows, n_az, LANES), np.float32)
+    b_r = np.empty((rows, n_az, LANES), np.float32)
+    b_i = np.empty((rows, n_az, LANES), np.float32)
+    stages = 0
+    while (1 << stages) < n_az:
+        stages += 1
+    if stages % 2 == 1:                         # where _fft_lanes leaves the spectrum
+        sp_r, sp_i = a_r.reshape(rows, flat), a_i.reshape(rows, flat)
+    else:
+        sp_r, sp_i = b_r.reshape(rows, flat), b_i.reshape(rows, flat)
+    peak_p = np.empty((1, n_st, flat), np.float32)
+    bins_p = np.empty((1, n_st, flat), np.int32)
+    peak_m = np.empty((1, n_st, flat), np.float32)
+    bins_m = np.empty((1, n_st, flat), np.int32)
+    er = np.empty(flat, np.float32)
+    ei = np.empty(flat, np.float32)
+    o_r = np.empty(flat, np.float32)
+    o_i = np.empty(flat, np.float32)
     sr, si = _split_steering(steer)
-    for r0 in range(0, nr, nb):
-        n = min(nb, nr - r0)
+    for r0 in range(0, nr, LANES):
+        n = min(LANES, nr - r0)
+        if n < LANES:                           # last, partial block: idle lanes stay 0
+            src_r[:] = 0.0
+            src_i[:] = 0.0
         peak_p[:] = -1.0
         peak_m[:] = -1.0
         bins_p[:] = 0
         bins_m[:] = 0
-        for r in range(n):
-            for d in range(nd):
-                xr[:] = 0.0
-                xi[:] = 0.0
-                for m in range(m_all):
-                    v = cube[channels[m], d, r0 + r]
-                    vr, vi = v.real, v.imag
-                    q = row_of[m]
-                    for a in range(naz):
-                        xr[q, a] += vr * tw_r[m, a] - vi * tw_i[m, a]
-                        xi[q, a] += vr * tw_i[m, a] + vi * tw_r[m, a]
-                _elevate(xr, xi, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, r,
-                         np.int32(d), er, ei, o_r, o_i)
+        for d in range(nd):
+            for mm in range(channels.size):
+                c, q, p = channels[mm], row_of[mm], az_pos[mm]
+                for t in range(n):
+                    v = cube[c, d, r0 + t]
+                    src_r[q, p, t] = v.real
+                    src_i[q, p, t] = v.imag
+            for q in range(rows):
+                _fft_lanes(src_r, src_i, b_r, b_i, a_r, a_i, w_r, w_i, q)
+            _elevate(sp_r, sp_i, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, 0,
+                     np.int32(d), er, ei, o_r, o_i)
         for half in range(1 if n_even < 0 else 2):
             peak, bins, els = (peak_p, bins_p, el_plus) if half == 0 else (peak_m, bins_m,
                                                                            el_minus)
             for e in range(n_st):
                 el = els[e]
                 for j in range(n_out):
-                    a = az_read[j]
-                    for r in range(n):
-                        out[el, j, r0 + r, 0] = peak[r, e, a] * scale
-                        out[el, j, r0 + r, 1] = velocities[bins[r, e, a]]
+                    a = az_read[j] * LANES
+                    for t in range(n):
+                        out[el, j, r0 + t, 0] = peak[0, e, a + t] * scale
+                        out[el, j, r0 + t, 1] = velocities[bins[0, e, a + t]]
 
 
 @_jit(nogil=True)

@@ -101,18 +101,6 @@ def resolve_engine(engine: str) -> str:
     return engine
 
 
-def _direct_azimuth(grid: AngleGrid) -> bool:
-    """Whether the numba engine forms the azimuth spectra by a direct DFT in its kernel.
-
-    A direct DFT costs ``M·n_az`` complex multiply-adds per range–Doppler cell, the FFT path
-    about ``rows·n_az·log2(n_az)`` plus a zero-padded copy, an FFT call and a de-interleave:
-    the direct DFT wins when the elements are few (single chip: 12 ≤ 2·6; the cascade's 134
-    elements on 4 rows of 128 azimuth bins take the FFT).
-    """
-    n_rows = np.unique(grid.el_pos).size
-    return bool(grid.num_elements <= n_rows * np.log2(grid.n_az))
-
-
 def elevation_steering(grid: AngleGrid) -> tuple[np.ndarray, np.ndarray]:
     """Occupied elevation rows and the DFT that takes them to the output elevation bins.
 
@@ -209,17 +197,18 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
     if engine == "numba":
         kernel = _numba_kernel()
         assert kernel is not None
-        from ._kernels import gather_rows, peak_over_doppler_dft
+        from ._kernels import gather_rows
         rows, steer, n_even, el_plus, el_minus = _paired_steering(grid)
         row_of = np.argsort(rows)[np.searchsorted(np.sort(rows), grid.el_pos)]
         rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
-        if _direct_azimuth(grid):
-            phase = -2.0 * np.pi * np.outer(grid.az_pos, np.arange(n_az)) / n_az
-            peak_over_doppler_dft(np.ascontiguousarray(elements, dtype=np.complex64), chan,
-                                  row_of.astype(np.int64), np.cos(phase).astype(np.float32),
-                                  np.sin(phase).astype(np.float32), steer, n_even, el_plus,
-                                  el_minus, grid.az_read.astype(np.int64), vel, float(scale),
-                                  out, rc)
+        if n_az >= 2 and n_az & (n_az - 1) == 0:
+            from ._kernels import peak_over_doppler_planar
+            w = np.exp(-2j * np.pi * np.arange(n_az // 2) / n_az).astype(np.complex64)
+            peak_over_doppler_planar(np.ascontiguousarray(elements, dtype=np.complex64), chan,
+                                     row_of.astype(np.int64), grid.az_pos.astype(np.int64),
+                                     steer, n_even, el_plus, el_minus,
+                                     grid.az_read.astype(np.int64), vel, float(scale), out,
+                                     np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag))
             return out
         buf = np.zeros((n_rows, rc, nd, width), dtype=np.complex64)
         az_read = grid.az_read.astype(np.int64)

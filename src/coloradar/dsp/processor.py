@@ -462,7 +462,7 @@ class RadarProcessor:
     def _heatmap_read_channels(self, adc: np.ndarray) -> np.ndarray:
         """:meth:`_heatmap` computing the range–Doppler cube of only the channels it reads
         (the cascade's 134 first pairs of 192 channels): same values, less work."""
-        ntx, nrx, nc, _ = self.calib.frame_shape
+        nrx = self.calib.frame_shape[1]
         first = self.calib.antenna.virtual.first_pair
         used, element_channel = np.unique(first[:, 0] * nrx + first[:, 1], return_inverse=True)
         rc = self._range_cube_compiled(self._check(adc), used)         # (K, chirp, range)
