@@ -274,14 +274,16 @@ def _fft_lanes(src_r: Any, src_i: Any, x_r: Any, x_i: Any, y_r: Any, y_i: Any, w
 
 
 @_jit(fastmath=_FM, nogil=True)
-def peak_over_doppler_planar(cube: Any, channels: Any, row_of: Any, az_pos: Any, steer: Any,
-                             n_even: int, el_plus: Any, el_minus: Any, az_read: Any,
-                             velocities: Any, scale: float, out: Any, w_r: Any,
+def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, az_pos: Any,
+                             steer: Any, n_even: int, el_plus: Any, el_minus: Any,
+                             az_read: Any, velocities: Any, out: Any, w_r: Any,
                              w_i: Any) -> None:  # pragma: no cover - compiled
     """The whole heatmap from the range–Doppler cube, range bins as SIMD lanes.
 
-    Element ``m`` is ``cube[channels[m]]`` (``cube`` complex64 ``(C, doppler, range)``), at
-    occupied row ``row_of[m]`` and azimuth position ``az_pos[m]``. For :data:`LANES` range
+    Element ``m`` is ``cube[channels[m]] · gain[channels[m]]`` (``cube`` complex64
+    ``(C, doppler, range)``, ``gain`` complex64 ``(C, doppler)``: the TDM compensation and
+    the ``1/M`` of the power's ``1/M²``, applied while gathering), at occupied row
+    ``row_of[m]`` and azimuth position ``az_pos[m]``. For :data:`LANES` range
     bins at a time and each Doppler bin: gather the elements into planar (real, imaginary)
     ``(rows, n_az, LANES)`` buffers, FFT every row along azimuth (``n_az = w_r.size·2``, a
     power of two) with the lanes innermost, then the elevation stage over the flattened
@@ -328,10 +330,12 @@ def peak_over_doppler_planar(cube: Any, channels: Any, row_of: Any, az_pos: Any,
         for d in range(nd):
             for mm in range(channels.size):
                 c, q, p = channels[mm], row_of[mm], az_pos[mm]
+                g = gain[c, d]
+                gr, gi = g.real, g.imag
                 for t in range(n):
                     v = cube[c, d, r0 + t]
-                    src_r[q, p, t] = v.real
-                    src_i[q, p, t] = v.imag
+                    src_r[q, p, t] = gr * v.real - gi * v.imag
+                    src_i[q, p, t] = gr * v.imag + gi * v.real
             for q in range(rows):
                 _fft_lanes(src_r, src_i, b_r, b_i, a_r, a_i, w_r, w_i, q)
             _elevate(sp_r, sp_i, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, 0,
@@ -344,7 +348,7 @@ def peak_over_doppler_planar(cube: Any, channels: Any, row_of: Any, az_pos: Any,
                 for j in range(n_out):
                     a = az_read[j] * LANES
                     for t in range(n):
-                        out[el, j, r0 + t, 0] = peak[0, e, a + t] * scale
+                        out[el, j, r0 + t, 0] = peak[0, e, a + t]
                         out[el, j, r0 + t, 1] = velocities[bins[0, e, a + t]]
 
 

@@ -36,6 +36,7 @@ explicit steering vectors for both radars and both signs.
 from __future__ import annotations
 
 import warnings
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -145,10 +146,35 @@ def _paired_steering(grid: AngleGrid) -> tuple[np.ndarray, np.ndarray, int, np.n
     return rows, steer, n_even, el_plus, el_minus
 
 
+class _Plan:
+    """What the numba engine needs of a grid, computed once per grid (see ``_plan``)."""
+
+    def __init__(self, grid: AngleGrid) -> None:
+        self.rows, self.steer, self.n_even, self.el_plus, self.el_minus = _paired_steering(grid)
+        self.row_of = np.argsort(self.rows)[np.searchsorted(np.sort(self.rows),
+                                                            grid.el_pos)].astype(np.int64)
+        self.az_pos = grid.az_pos.astype(np.int64)
+        self.az_read = grid.az_read.astype(np.int64)
+        n = grid.n_az
+        self.planar = n >= 2 and n & (n - 1) == 0      # the planar kernel's radix-2 FFT
+        w = np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64)
+        self.w_r, self.w_i = np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag)
+
+
+_PLANS: weakref.WeakKeyDictionary[AngleGrid, _Plan] = weakref.WeakKeyDictionary()
+
+
+def _plan(grid: AngleGrid) -> _Plan:
+    plan = _PLANS.get(grid)
+    if plan is None:
+        plan = _PLANS[grid] = _Plan(grid)
+    return plan
+
+
 def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.ndarray,
                           workers: int = 1, chunk_size: int = CHUNK_SIZE,
-                          engine: str = "auto", channels: np.ndarray | None = None
-                          ) -> np.ndarray:
+                          engine: str = "auto", channels: np.ndarray | None = None,
+                          doppler_phase: np.ndarray | None = None) -> np.ndarray:
     """Heatmap from the per-element range–Doppler cube.
 
     Parameters
@@ -171,6 +197,10 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
         int ``(M,)`` or None. When given, ``elements`` is a ``(C, doppler, range)`` cube of
         channels and element ``m`` is ``elements[channels[m]]`` (saves copying the elements
         out of a range–Doppler cube).
+    doppler_phase
+        complex ``(C, doppler)`` or None: factors that multiply each channel (row of
+        ``elements``) per Doppler bin first, e.g. the TDM compensation (the numba engine
+        applies them while gathering, saving a pass over the cube).
 
     Returns
     -------
@@ -180,6 +210,10 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
         channel 1 the range rate of that peak [m/s].
     """
     engine = resolve_engine(engine)
+    plan = _plan(grid) if engine == "numba" else None
+    if doppler_phase is not None and (plan is None or not plan.planar):
+        elements = elements * np.asarray(doppler_phase, dtype=np.complex64)[:, :, None]
+        doppler_phase = None
     if channels is not None and engine == "numpy":
         elements, channels = elements[channels], None
     chan = (np.arange(elements.shape[0]) if channels is None
@@ -194,26 +228,23 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
     scale = np.float32(1.0 / m**2)
     out = np.empty((n_el, grid.num_az, nr, 2), dtype=np.float32)
 
-    if engine == "numba":
+    if plan is not None:
         kernel = _numba_kernel()
         assert kernel is not None
         from ._kernels import gather_rows
-        rows, steer, n_even, el_plus, el_minus = _paired_steering(grid)
-        row_of = np.argsort(rows)[np.searchsorted(np.sort(rows), grid.el_pos)]
-        rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
-        if n_az >= 2 and n_az & (n_az - 1) == 0:
+        steer, n_even, el_plus, el_minus = plan.steer, plan.n_even, plan.el_plus, plan.el_minus
+        row_of, az_pos, az_read = plan.row_of, plan.az_pos, plan.az_read
+        if plan.planar:
             from ._kernels import peak_over_doppler_planar
-            w = np.exp(-2j * np.pi * np.arange(n_az // 2) / n_az).astype(np.complex64)
-            peak_over_doppler_planar(np.ascontiguousarray(elements, dtype=np.complex64), chan,
-                                     row_of.astype(np.int64), grid.az_pos.astype(np.int64),
-                                     steer, n_even, el_plus, el_minus,
-                                     grid.az_read.astype(np.int64), vel, float(scale), out,
-                                     np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag))
+            gain = np.full((elements.shape[0], nd), 1.0 / m, dtype=np.complex64)
+            if doppler_phase is not None:
+                gain *= np.asarray(doppler_phase, dtype=np.complex64)
+            peak_over_doppler_planar(np.ascontiguousarray(elements, dtype=np.complex64), gain,
+                                     chan, row_of, az_pos, steer, n_even, el_plus,
+                                     el_minus, az_read, vel, out, plan.w_r, plan.w_i)
             return out
+        rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
         buf = np.zeros((n_rows, rc, nd, width), dtype=np.complex64)
-        az_read = grid.az_read.astype(np.int64)
-        az_pos = grid.az_pos.astype(np.int64)
-        row_of = row_of.astype(np.int64)
         elements = np.ascontiguousarray(elements, dtype=np.complex64)
         for r0 in range(0, nr, rc):
             n = min(nr, r0 + rc) - r0

@@ -307,6 +307,7 @@ class RadarProcessor:
         self._gain = (cal * coherent_window(s.range_window, ns)).astype(np.complex64)
         self._chirp_weight = wd.astype(np.float32)
         self._engine = resolve_engine(s.engine)
+        self._read_channels: tuple | None = None      # see _heatmap_read_channels
         self._coupling = None
         if s.coupling_subtraction and calib.coupling is not None:
             c = coupling_signal(calib.coupling, ns)
@@ -462,18 +463,21 @@ class RadarProcessor:
     def _heatmap_read_channels(self, adc: np.ndarray) -> np.ndarray:
         """:meth:`_heatmap` computing the range–Doppler cube of only the channels it reads
         (the cascade's 134 first pairs of 192 channels): same values, less work."""
-        nrx = self.calib.frame_shape[1]
-        first = self.calib.antenna.virtual.first_pair
-        used, element_channel = np.unique(first[:, 0] * nrx + first[:, 1], return_inverse=True)
+        if self._read_channels is None:
+            nrx = self.calib.frame_shape[1]
+            first = self.calib.antenna.virtual.first_pair
+            used, element_channel = np.unique(first[:, 0] * nrx + first[:, 1],
+                                              return_inverse=True)
+            tdm = None if self._tdm is None else self._tdm[used // nrx, 0, :, 0]   # (K, nd)
+            self._read_channels = used, element_channel, tdm
+        used, element_channel, tdm = self._read_channels
         rc = self._range_cube_compiled(self._check(adc), used)         # (K, chirp, range)
         v = sfft.fft(rc, n=self.doppler_fft_size, axis=1, workers=self.settings.workers)
         if self.doppler_fft_size % 2:
             v = sfft.fftshift(v, axes=1)
-        if self._tdm is not None:
-            v *= self._tdm[used // nrx, 0]
         return heatmap_from_elements(v, self.grid, self.velocities,
                                      workers=self.settings.workers, engine=self._engine,
-                                     channels=element_channel)
+                                     channels=element_channel, doppler_phase=tdm)
 
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
         if self.settings.overlap == "first":
