@@ -80,7 +80,7 @@ def test_engine_on_another_layout(engine, num_el, num_az):
     grid = angle_grid(ant, 78e9, num_el, num_az)
     assert (grid.n_el == num_el) == (num_el == 8)
     g = np.random.default_rng(4)
-    m, nd, nr = grid.num_elements, 8, 19       # 19 range bins: a full block of 16 and a partial one
+    m, nd, nr = grid.num_elements, 7, 19   # 19 range bins: a full block of 16 and a partial one; odd nd
     elements = (g.standard_normal((m, nd, nr)) + 1j * g.standard_normal((m, nd, nr))).astype(
         np.complex64)
     vel = np.arange(nd) - 4.0
