@@ -432,8 +432,9 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
     ``channels[k]``.
 
     All complex arrays are passed as float32 views (re, im interleaved along the last axis),
-    which lets LLVM vectorise the loops. One pass over the ADC frame replaces four numpy
-    passes; samples beyond ``ns`` (zero padding) are left untouched. ``adc`` is
+    which lets LLVM vectorise the loops. Two passes over each chirp (its mean, then the
+    result) replace four numpy passes over the frame; samples beyond ``ns`` (zero padding)
+    are left untouched. ``adc`` is
     ``(tx, rx, chirp, 2·ns)``; ``channels`` int ``(K,)`` the flat ``tx·num_rx + rx``
     indices to prepare (all, or only those a heatmap reads); ``out`` ``(K, chirp, 2·nfft)``.
     ``coupling`` is ``(tx, rx, 2·ns)`` or empty (no coupling); ``gain`` ``(tx, rx, 2·ns)``
@@ -444,35 +445,41 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
     has_c = coupling.size > 0
     for k in range(channels.size):
         t, r = channels[k] // nrx, channels[k] % nrx
-        g = gain[t, r]
-        cp = coupling[t, r] if has_c else g
+        # the coupling's own mean over samples, once per channel: mean(x − c) = mean(x) − mean(c)
+        cmr = 0.0
+        cmi = 0.0
+        if has_c and dc_removal:
+            for n in range(ns):
+                cmr += coupling[t, r, 2 * n]
+                cmi += coupling[t, r, 2 * n + 1]
         for c in range(nc):
-            x = adc[t, r, c]
-            y = out[k, c]
-            if has_c:
-                for i in range(ns2):
-                    y[i] = x[i] - cp[i]
-            else:
-                for i in range(ns2):
-                    y[i] = x[i]
+            # two passes over the chirp: its mean, then (x − c − mean)·gain·w straight into out
             mr = np.float32(0.0)
             mi = np.float32(0.0)
             if dc_removal:
                 sr = 0.0
                 si = 0.0
                 for n in range(ns):
-                    sr += y[2 * n]
-                    si += y[2 * n + 1]
-                mr = np.float32(sr / ns)
-                mi = np.float32(si / ns)
+                    sr += adc[t, r, c, 2 * n]
+                    si += adc[t, r, c, 2 * n + 1]
+                mr = np.float32((sr - cmr) / ns)
+                mi = np.float32((si - cmi) / ns)
             w = chirp_weight[c]
-            for n in range(ns):
-                vr = y[2 * n] - mr
-                vi = y[2 * n + 1] - mi
-                gr = g[2 * n] * w
-                gi = g[2 * n + 1] * w
-                y[2 * n] = vr * gr - vi * gi
-                y[2 * n + 1] = vr * gi + vi * gr
-
+            if has_c:
+                for n in range(ns):
+                    vr = adc[t, r, c, 2 * n] - coupling[t, r, 2 * n] - mr
+                    vi = adc[t, r, c, 2 * n + 1] - coupling[t, r, 2 * n + 1] - mi
+                    gr = gain[t, r, 2 * n] * w
+                    gi = gain[t, r, 2 * n + 1] * w
+                    out[k, c, 2 * n] = vr * gr - vi * gi
+                    out[k, c, 2 * n + 1] = vr * gi + vi * gr
+            else:
+                for n in range(ns):
+                    vr = adc[t, r, c, 2 * n] - mr
+                    vi = adc[t, r, c, 2 * n + 1] - mi
+                    gr = gain[t, r, 2 * n] * w
+                    gi = gain[t, r, 2 * n + 1] * w
+                    out[k, c, 2 * n] = vr * gr - vi * gi
+                    out[k, c, 2 * n + 1] = vr * gi + vi * gr
 
 _announce()
