@@ -8,8 +8,9 @@ Where numba finds no writable cache folder (a service account, a read-only conta
 package folder read-only and ``NUMBA_CACHE_DIR`` unset or unwritable), numba refuses
 ``cache=True`` at import with ``RuntimeError: cannot cache function … no locator available``.
 The kernels are then compiled without a cache (in every process) and one
-:class:`RuntimeWarning` says so. Whenever a kernel is not in the cache yet, one line on stderr
-says that the first frame compiles them (a few seconds), instead of a silent pause.
+:class:`RuntimeWarning` says so. When a kernel about to run is not in the cache yet, one line
+on stderr (once per process) says that numba compiles them (a few seconds), instead of a
+silent pause.
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ __all__ = ["CACHE_PROBLEM", "LANES", "gather_rows", "peak_over_doppler",
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
 
-_CACHED: list[Any] = []          # the dispatchers compiled with cache=True
 
 
 def _jit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
@@ -38,14 +38,11 @@ def _jit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
         global CACHE_PROBLEM
         if CACHE_PROBLEM is None:
             try:
-                disp = numba.njit(cache=True, **options)(fn)
+                return numba.njit(cache=True, **options)(fn)
             except RuntimeError as exc:          # "cannot cache function …: no locator available"
                 if "cannot cache" not in str(exc):
                     raise
                 CACHE_PROBLEM = str(exc)
-            else:
-                _CACHED.append(disp)
-                return disp
         return numba.njit(**options)(fn)
     return wrap
 
@@ -61,17 +58,35 @@ def _is_cached(disp: Any) -> bool:
         return False
 
 
-def _announce() -> None:
-    """One warning when there is no cache; one stderr line when the first frame will compile."""
+def _warn_no_cache() -> None:
+    """One warning per process when numba has nowhere to keep the compiled kernels."""
     if CACHE_PROBLEM is not None:
         warnings.warn("coloradar: numba finds no writable folder for its cache (set "
                       "NUMBA_CACHE_DIR to a writable folder to keep the compiled kernels); the "
                       "DSP kernels are compiled again in every process (a few seconds on the "
                       f"first frame). numba said: {CACHE_PROBLEM}", RuntimeWarning, stacklevel=2)
-        return
-    if not all(_is_cached(d) for d in _CACHED):
-        print("coloradar: compiling the numba DSP kernels on the first frame (a few seconds, "
-              "once: they are cached on disk)", file=sys.stderr, flush=True)
+
+
+_ANNOUNCED = False
+
+
+class _Announced:
+    """A kernel that says, once per process, that numba is about to compile it (the first
+    frame then takes seconds) when its machine code is not in the on-disk cache."""
+
+    def __init__(self, kernel: Any) -> None:
+        self.kernel = kernel
+        self.checked = False
+
+    def __call__(self, *args: Any) -> Any:
+        global _ANNOUNCED
+        if not self.checked:
+            self.checked = True
+            if not _ANNOUNCED and CACHE_PROBLEM is None and not _is_cached(self.kernel):
+                _ANNOUNCED = True
+                print("coloradar: compiling the numba DSP kernels (a few seconds, once: they "
+                      "are cached on disk)", file=sys.stderr, flush=True)
+        return self.kernel(*args)
 
 
 _FM = {"contract", "nnan"}
@@ -482,4 +497,8 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
                     out[k, c, 2 * n] = vr * gr - vi * gi
                     out[k, c, 2 * n + 1] = vr * gi + vi * gr
 
-_announce()
+_warn_no_cache()
+gather_rows = _Announced(gather_rows)
+peak_over_doppler = _Announced(peak_over_doppler)
+peak_over_doppler_planar = _Announced(peak_over_doppler_planar)
+prepare_chirps = _Announced(prepare_chirps)
