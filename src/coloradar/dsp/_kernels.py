@@ -30,7 +30,6 @@ CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
 
 
-
 def _jit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     """``numba.njit(cache=True, **options)``, or without the cache where numba has no folder
     to write it to (then :data:`CACHE_PROBLEM` says why)."""
