@@ -14,11 +14,18 @@ range bins (sized to stay in cache) the work is
    matrix times the ``(rows, doppler·azimuth)`` azimuth spectra;
 3. the power and the maximum over Doppler with its bin.
 
-Steps 2–3 run in one of two engines (``engine=``):
+The steps run in one of two engines (``engine=``):
 
 ``"numba"`` (used when :mod:`numba` is installed: ``pip install coloradar[accel]``)
-    one compiled loop computes each beam value, its power and the running Doppler maximum
-    in registers; the 8.4 M beam values are never written to memory.
+    one compiled pass per block of 16 range bins (:data:`~coloradar.dsp._kernels.LANES`),
+    the range bins as the SIMD lanes: per Doppler bin it gathers the elements (TDM
+    compensation applied on the way) into planar real/imaginary buffers, does step 1 with
+    its own Stockham radix-2 FFT (every butterfly one vector operation on 16 range bins, no
+    zero-padded copies or FFT calls) and steps 2–3 over the flattened (azimuth, range)
+    axis, computing each beam value, its power and the running Doppler maximum in
+    registers; the 8.4 M beam values are never written to memory, and the maximum carries
+    the range rate itself. Azimuth grids that are not a power of two take scipy's FFT per
+    chunk and a kernel for steps 2–3.
 ``"numpy"``
     scipy FFTs along azimuth and elevation of the rows the aperture spans (7 of 32 for the
     cascade), ``|·|`` with the Doppler bin packed into the low mantissa bits (4 for 16 bins,
