@@ -286,15 +286,17 @@ LANES = 16
 
 @numba.njit(inline="always", fastmath=_FM)
 def _fft_lanes(src_r: Any, src_i: Any, x_r: Any, x_i: Any, y_r: Any, y_i: Any, w_r: Any,
-               w_i: Any, q: int) -> None:  # pragma: no cover - compiled
+               w_i: Any, q: int, skip: int) -> None:  # pragma: no cover - compiled
     # FFT over axis 1 of row q of src ``(rows, n, LANES)`` (n a power of two), every lane a
     # separate transform: Stockham autosort radix 2 (natural order in, natural order out, no
     # bit reversal), ping-pong y <- src, x <- y, y <- x, ...: the result lies in y after an
     # odd number of stages, in x after an even one. w = exp(−2πj·t/n), t < n/2. The lane loop
-    # is innermost: every butterfly is one vector operation on 16 range bins.
+    # is innermost: every butterfly is one vector operation on 16 range bins. With skip = 1
+    # src already holds the first stage's output (done while gathering, see
+    # peak_over_doppler_planar).
     n = src_r.shape[1]
-    half = n // 2
-    m = 1
+    half = n // 2 >> skip
+    m = 1 << skip
     first = True
     while half >= 1:
         for j in range(half):
@@ -362,6 +364,11 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
     stages = 0
     while (1 << stages) < n_az:
         stages += 1
+    # All elements in the first half of the azimuth points (the single chip: 8 of 64): the
+    # FFT's first stage has no second inputs, y[2p] = x[p], y[2p + 1] = w^p·x[p], and the
+    # gather writes its output directly (the other points stay zero): one stage fewer.
+    skip = 1 if stages > 1 and 2 * (az_pos.max() + 1) <= n_az else 0
+    stages -= skip
     if stages % 2 == 1:                         # where _fft_lanes leaves the spectrum
         sp_r, sp_i = a_r.reshape(2, rows, flat), a_i.reshape(2, rows, flat)
     else:
@@ -395,15 +402,24 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
                     c, q, p = channels[mm], row_of[mm], az_pos[mm]
                     g = gain[c, d]
                     gr, gi = g.real, g.imag
-                    for t in range(n):
-                        v = cube[c, d, r0 + t]
-                        src_r[q, p, t] = gr * v.real - gi * v.imag
-                        src_i[q, p, t] = gr * v.imag + gi * v.real
+                    if skip:
+                        hr, hi = gr * w_r[p] - gi * w_i[p], gr * w_i[p] + gi * w_r[p]
+                        for t in range(n):
+                            v = cube[c, d, r0 + t]
+                            src_r[q, 2 * p, t] = gr * v.real - gi * v.imag
+                            src_i[q, 2 * p, t] = gr * v.imag + gi * v.real
+                            src_r[q, 2 * p + 1, t] = hr * v.real - hi * v.imag
+                            src_i[q, 2 * p + 1, t] = hr * v.imag + hi * v.real
+                    else:
+                        for t in range(n):
+                            v = cube[c, d, r0 + t]
+                            src_r[q, p, t] = gr * v.real - gi * v.imag
+                            src_i[q, p, t] = gr * v.imag + gi * v.real
                 for q in range(rows):
                     if d == d0:
-                        _fft_lanes(src_r, src_i, b0r, b0i, a0r, a0i, w_r, w_i, q)
+                        _fft_lanes(src_r, src_i, b0r, b0i, a0r, a0i, w_r, w_i, q, skip)
                     else:
-                        _fft_lanes(src_r, src_i, b1r, b1i, a1r, a1i, w_r, w_i, q)
+                        _fft_lanes(src_r, src_i, b1r, b1i, a1r, a1i, w_r, w_i, q, skip)
             if d0 + 1 < nd:
                 _elevate2(x_r, x_i, y_r, y_i, sr, si, n_even, peak_p, bins_p, peak_m, bins_m,
                           velocities[d0], velocities[d0 + 1], er, ei, o_r, o_i)
