@@ -18,8 +18,8 @@ The steps run in one of two engines (``engine=``):
 
 ``"numba"`` (used when :mod:`numba` is installed: ``pip install coloradar[accel]``)
     one compiled pass per block of 16 range bins (:data:`~coloradar.dsp._kernels.LANES`),
-    the range bins as the SIMD lanes: per Doppler bin it gathers the elements (TDM
-    compensation applied on the way) into planar real/imaginary buffers, does step 1 with
+    the range bins as the SIMD lanes: per Doppler bin it gathers the elements (times
+    ``doppler_phase`` when given) into planar real/imaginary buffers, does step 1 with
     its own Stockham radix-2 FFT (every butterfly one vector operation on 16 range bins, no
     zero-padded copies or FFT calls) and steps 2–3 over the flattened (azimuth, range)
     axis, computing each beam value, its power and the running Doppler maximum in

@@ -462,22 +462,26 @@ class RadarProcessor:
 
     def _heatmap_read_channels(self, adc: np.ndarray) -> np.ndarray:
         """:meth:`_heatmap` computing the range–Doppler cube of only the channels it reads
-        (the cascade's 134 first pairs of 192 channels): same values, less work."""
+        (the cascade's 134 first pairs of 192 channels): the same values to the bit (FFTs do
+        not depend on the batch; TDM is the same multiply as in :meth:`_doppler`, so that
+        :meth:`products` gives the same heatmap), less work."""
         if self._read_channels is None:
             nrx = self.calib.frame_shape[1]
             first = self.calib.antenna.virtual.first_pair
             used, element_channel = np.unique(first[:, 0] * nrx + first[:, 1],
                                               return_inverse=True)
-            tdm = None if self._tdm is None else self._tdm[used // nrx, 0, :, 0]   # (K, nd)
+            tdm = None if self._tdm is None else self._tdm[used // nrx, 0]   # (K, nd, 1)
             self._read_channels = used, element_channel, tdm
         used, element_channel, tdm = self._read_channels
         rc = self._range_cube_compiled(self._check(adc), used)         # (K, chirp, range)
         v = sfft.fft(rc, n=self.doppler_fft_size, axis=1, workers=self.settings.workers)
         if self.doppler_fft_size % 2:
             v = sfft.fftshift(v, axes=1)
+        if tdm is not None:
+            v *= tdm
         return heatmap_from_elements(v, self.grid, self.velocities,
                                      workers=self.settings.workers, engine=self._engine,
-                                     channels=element_channel, doppler_phase=tdm)
+                                     channels=element_channel)
 
     def _heatmap(self, rd: np.ndarray) -> np.ndarray:
         if self.settings.overlap == "first":
