@@ -9,7 +9,7 @@ Quick start::
 See ``docs/simulator.md`` for the models, the scene file format and the truth file.
 """
 
-from .imu import GRAVITY, ImuModel, simulate_imu
+from .imu import GRAVITY, GX5_25, ImuModel, simulate_imu
 from .lidar import LidarModel, column_times, simulate_scan
 from .paths import EllipsePath, LinePath, Sinusoids, path_from_dict
 from .radar import (
@@ -35,6 +35,7 @@ from .run import (
     simulate_run,
     simulated_calibration,
 )
+from .rest import RestStart
 from .scene import Box, MovingObject, Rect, Reflector, Scatterers, Scene, load_scene, scene_from_dict
 from .scenes import SCENES, builtin_scene, builtin_scene_dict
 from .trajectory import MOTION_PROFILES, RigState, RigTrajectory, make_trajectory
@@ -49,6 +50,7 @@ __all__ = [
     "SENSOR_CHOICES",
     "Box",
     "EllipsePath",
+    "GX5_25",
     "ImuModel",
     "LidarModel",
     "LinePath",
@@ -58,6 +60,7 @@ __all__ = [
     "Rect",
     "Reflector",
     "RigState",
+    "RestStart",
     "RigTrajectory",
     "Scatterers",
     "Scene",
