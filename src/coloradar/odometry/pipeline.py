@@ -33,6 +33,7 @@ from .dead_reckoning import ORIENTATION_SOURCES, estimate_gyro_bias, radar_inert
 from .ego_velocity import EgoVelocityConfig, static_inlier_threshold
 from .tum import write_tum
 from .velocity_track import EgoVelocityTrack, estimate_ego_velocities, write_velocity_table
+from .zero_velocity import ZeroVelocityConfig, still_world
 
 __all__ = [
     "INFO_FILE",
@@ -133,6 +134,18 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
     -------
     EgoVelocityTrack
     """
+    return _ego_velocity(seq, radar, source, config=config, processing=processing, start=start,
+                         duration=duration, stride=stride, max_frames=max_frames, seed=seed,
+                         progress=progress)[0]
+
+
+def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityConfig | None,
+                  processing: dict | None, start: float | None, duration: float | None,
+                  stride: int, max_frames: int | None, seed: int, progress: Progress | None,
+                  still_config: ZeroVelocityConfig | None = None
+                  ) -> tuple[EgoVelocityTrack, np.ndarray]:
+    """:func:`run_ego_velocity`, and per frame whether the radar sees a still world
+    (:func:`~coloradar.odometry.zero_velocity.still_world`, computed on the same clouds)."""
     source = source or default_source(seq, radar)
     if source not in SOURCES:
         raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
@@ -143,6 +156,8 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
     cfg = config or ego_velocity_config(seq.calib.radar(radar))
 
     skipped: dict[int, str] = {}
+    still = np.zeros(idx.size, dtype=bool)
+    zv = still_config or ZeroVelocityConfig()
 
     def clouds() -> Iterator[np.ndarray]:
         for j, k in enumerate(idx):
@@ -153,13 +168,15 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
                 skipped[j] = f"unreadable frame: {stream.path(int(k))}"
                 yield np.zeros((0, 5), dtype=np.float32)
             else:
-                yield convert(frame)
+                cloud = convert(frame)
+                still[j] = still_world(cloud, zv, cfg.min_range)
+                yield cloud
 
     track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
                                     frame=radar, progress=progress)
     for j, why in skipped.items():
         track.reasons[j] = why
-    return track
+    return track, still
 
 
 def run_path(seq) -> str:

@@ -2,8 +2,9 @@
 
 Nobody tells the filter when the rig stands still. A radar frame is declared *static* when
 
-- its ego-velocity is usable and slower than ``max_speed`` (every static point shows a zero
-  range rate: the radar sees a still world), and
+- its ego-velocity is usable and slower than ``max_speed``, or its cloud shows a still world
+  (:func:`still_world`: most points at zero range rate; this needs no ego-velocity, so it
+  holds for the sparse clouds of a radar at rest too), and
 - over ``window`` seconds around it the IMU is quiet: the per-axis standard deviation of the
   angular rate is below ``max_gyro_std`` and that of the specific force below
   ``max_accel_std`` (a rig moving at constant velocity would pass the radar test only at zero
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames"]
+__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames", "still_world"]
 
 
 @dataclass(frozen=True)
@@ -35,12 +36,43 @@ class ZeroVelocityConfig:
         [m/s²] over the window.
     window
         Length of the IMU window centred on the frame [s].
+    still_rate, still_fraction, still_min_points
+        :func:`still_world`: a cloud of at least ``still_min_points`` points of which
+        ``still_fraction`` have ``|range rate| < still_rate`` [m/s] shows a still world.
     """
 
     max_speed: float = 0.03
     max_gyro_std: float = 0.01
     max_accel_std: float = 0.08
     window: float = 0.4
+    still_rate: float = 0.05
+    still_fraction: float = 0.8
+    still_min_points: int = 3
+
+
+def still_world(cloud: np.ndarray, config: ZeroVelocityConfig | None = None,
+                min_range: float = 0.3) -> bool:
+    """Whether a radar point cloud shows a still world: at least ``still_min_points`` points
+    beyond ``min_range`` [m], and ``still_fraction`` of them with ``|range rate| <
+    still_rate``. It needs no ego-velocity, so it also holds for the sparse clouds of a radar
+    at rest (e.g. the single chip's on-board detections, too few for RANSAC).
+
+    Parameters
+    ----------
+    cloud
+        float ``(N, 5)``: ``x y z intensity range_rate``, radar frame.
+    """
+    cfg = config or ZeroVelocityConfig()
+    c = np.asarray(cloud)
+    if c.ndim != 2 or c.shape[1] < 5 or c.shape[0] == 0:
+        return False
+    r = np.linalg.norm(c[:, :3], axis=1)
+    rr = c[:, 4]
+    use = np.isfinite(r) & np.isfinite(rr) & (r > min_range)
+    n = int(use.sum())
+    if n < cfg.still_min_points:
+        return False
+    return bool(np.mean(np.abs(rr[use]) < cfg.still_rate) >= cfg.still_fraction)
 
 
 def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np.ndarray,
@@ -69,7 +101,7 @@ def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np
 
 
 def static_frames(speeds: np.ndarray, ok: np.ndarray, quiet: np.ndarray,
-                  config: ZeroVelocityConfig) -> np.ndarray:
+                  config: ZeroVelocityConfig, still: np.ndarray | None = None) -> np.ndarray:
     """bool ``(M,)``: radar frames at which the rig is taken to stand still.
 
     Parameters
@@ -80,8 +112,13 @@ def static_frames(speeds: np.ndarray, ok: np.ndarray, quiet: np.ndarray,
         bool ``(M,)``: the frame has a usable ego-velocity.
     quiet
         bool ``(M,)``: :func:`imu_quiet` at the frames' times.
+    still
+        bool ``(M,)``: :func:`still_world` of each frame's cloud (a frame without an
+        ego-velocity can still show a still world); None: not known.
     """
     s = np.asarray(speeds, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         slow = np.asarray(ok, dtype=bool) & np.isfinite(s) & (s < config.max_speed)
+    if still is not None:
+        slow = slow | np.asarray(still, dtype=bool)
     return slow & np.asarray(quiet, dtype=bool)
