@@ -50,7 +50,7 @@ P, V, TH, BA, BG = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12
 def skew(w: np.ndarray) -> np.ndarray:
     """``[w]×`` for ``(3,)`` or ``(N, 3)`` vectors: ``(3, 3)`` or ``(N, 3, 3)``."""
     w = np.asarray(w, dtype=np.float64)
-    out = np.zeros(w.shape[:-1] + (3, 3))
+    out = np.zeros((*w.shape[:-1], 3, 3))
     out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
     out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
     out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]

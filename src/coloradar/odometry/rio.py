@@ -33,7 +33,7 @@ from scipy.stats import chi2
 from ..calib import Calibration
 from ..errors import ColoradarError, DataWarning, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base
-from .eskf import BA, BG, P, TH, V, ErrorStateEKF, ImuNoise, skew
+from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
 from .velocity_track import EgoVelocityTrack
 from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames

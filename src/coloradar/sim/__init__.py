@@ -24,6 +24,7 @@ from .radar import (
     visible_targets,
 )
 from .radar_if import apply_channel_errors, slow_times, synthesize_adc
+from .rest import RestStart
 from .run import (
     RATES,
     SENSOR_CHOICES,
@@ -35,7 +36,6 @@ from .run import (
     simulate_run,
     simulated_calibration,
 )
-from .rest import RestStart
 from .scene import Box, MovingObject, Rect, Reflector, Scatterers, Scene, load_scene, scene_from_dict
 from .scenes import SCENES, builtin_scene, builtin_scene_dict
 from .trajectory import MOTION_PROFILES, RigState, RigTrajectory, make_trajectory
@@ -43,6 +43,7 @@ from .truth import SimTruth, load_truth, match_detections
 
 __all__ = [
     "GRAVITY",
+    "GX5_25",
     "MOTION_PROFILES",
     "RADAR_MODELS",
     "RATES",
@@ -50,7 +51,6 @@ __all__ = [
     "SENSOR_CHOICES",
     "Box",
     "EllipsePath",
-    "GX5_25",
     "ImuModel",
     "LidarModel",
     "LinePath",
@@ -59,8 +59,8 @@ __all__ = [
     "RadarTargets",
     "Rect",
     "Reflector",
-    "RigState",
     "RestStart",
+    "RigState",
     "RigTrajectory",
     "Scatterers",
     "Scene",

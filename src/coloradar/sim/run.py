@@ -75,7 +75,6 @@ from ..formats.layout import COLORADAR, RunLayout, get_layout
 from ..formats.source import read_file_text
 from .imu import GX5_25, ImuModel, simulate_imu
 from .lidar import LidarModel, simulate_scan
-from .rest import RestStart
 from .radar import (
     RADAR_MODELS,
     make_channel_errors,
@@ -84,6 +83,7 @@ from .radar import (
     radar_frame,
     visible_targets,
 )
+from .rest import RestStart
 from .scene import Scatterers, Scene, load_scene
 from .scenes import SCENES, builtin_scene
 from .trajectory import MOTION_PROFILES, RigTrajectory, make_trajectory
