@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -38,7 +38,7 @@ from .gravity import gravity_alignment
 from .velocity_track import EgoVelocityTrack
 from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames
 
-__all__ = ["RioConfig", "RioResult", "rio_odometry"]
+__all__ = ["RioConfig", "RioResult", "rio_odometry", "rio_summary"]
 
 _G0 = 9.80665
 _DEG = np.pi / 180.0
@@ -98,7 +98,7 @@ class RioConfig:
     estimate_time_offset: bool = True
     time_offset: float = 0.0
     time_offset_std: float = 0.05
-    estimate_extrinsic_rotation: bool = False
+    estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
     planar_vz_std: float = 0.1
@@ -406,3 +406,47 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     return RioResult(traj, out_stamp, cov, a_rot.apply(out_v), out_b[:, 0], out_b[:, 1],
                      out_b[:, 2], out_b[:, 3], out_td[:, 0], out_td[:, 1], phi, names, st0,
                      stats)
+
+
+def _floats(a: np.ndarray, digits: int = 9) -> list:
+    return np.round(np.asarray(a, dtype=np.float64), digits).tolist()
+
+
+def rio_summary(result: RioResult, config: RioConfig | None = None) -> dict:
+    """The filter's estimates as JSON-ready data (the ``"rio"`` entry of ``odometry.json``).
+
+    Keys: ``config`` (the settings), ``radars``, ``time_offset_s`` and ``time_offset_std_s``
+    (final, per radar), ``accel_bias_m_s2``, ``gyro_bias_rad_s`` and their ``*_std`` (final),
+    ``extrinsic_rotation_correction_deg`` (per radar, rotation vector in its frame),
+    ``static_frames``, ``stats`` (per radar: updates, rejected, zupts, failed) and ``poses``:
+    per output pose ``timestamp`` (IMU clock), ``radar_timestamp``, ``covariance_upper``
+    (the 21 entries of the upper triangle, row by row, of the 6 × 6 covariance of the base
+    position [m²] and attitude [rad²], world frame), ``accel_bias``, ``gyro_bias``,
+    ``time_offset`` and ``static``.
+    """
+    r = result
+    iu = np.triu_indices(6)
+    out: dict = {
+        "radars": list(r.radars),
+        "time_offset_s": _floats(r.time_offset[-1]),
+        "time_offset_std_s": _floats(r.time_offset_std[-1]),
+        "accel_bias_m_s2": _floats(r.accel_bias[-1]),
+        "accel_bias_std_m_s2": _floats(r.accel_bias_std[-1]),
+        "gyro_bias_rad_s": _floats(r.gyro_bias[-1]),
+        "gyro_bias_std_rad_s": _floats(r.gyro_bias_std[-1]),
+        "extrinsic_rotation_correction_deg": _floats(np.degrees(r.extrinsic_rotation), 6),
+        "static_frames": int(r.static.sum()),
+        "stats": r.stats,
+        "poses": {
+            "timestamp": _floats(r.trajectory.timestamps),
+            "radar_timestamp": _floats(r.frame_timestamps),
+            "covariance_upper": [_floats(c[iu], 12) for c in r.covariance],
+            "accel_bias": _floats(r.accel_bias),
+            "gyro_bias": _floats(r.gyro_bias, 12),
+            "time_offset": _floats(r.time_offset),
+            "static": [bool(x) for x in r.static],
+        },
+    }
+    if config is not None:
+        out = {"config": asdict(config), **out}
+    return out
