@@ -17,6 +17,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
+from _synth import REFERENCE_CALIB
 from coloradar.calib import Calibration, Extrinsic, load_calibration, preset_calibration
 from coloradar.odometry import EgoVelocityTrack, RioConfig, rio_odometry
 from coloradar.odometry.eskf import GRAVITY, ErrorStateEKF, ImuNoise
@@ -26,8 +27,6 @@ from coloradar.sim.imu import GX5_25, simulate_imu
 from coloradar.sim.paths import EllipsePath
 from coloradar.sim.rest import RestStart
 from coloradar.sim.trajectory import make_trajectory
-
-from _synth import REFERENCE_CALIB
 
 PRESET = preset_calibration()
 
@@ -183,7 +182,7 @@ def test_time_offset_is_recovered():
     """Radar frames stamped 25 ms early (stamp = t − 25 ms): the filter starts at 0 ± 50 ms
     and must end within 3 ms."""
     kw = dict(profile="handheld", speed=2.0, td=0.025)
-    imu_t, data, track, traj, *_ = _synthetic(30.0, 3, **kw)
+    imu_t, data, track, *_ = _synthetic(30.0, 3, **kw)
     res = rio_odometry(track, PRESET, imu_t, data)
     assert abs(res.time_offset[-1, 0] - 0.025) < 0.003, res.time_offset[-1]
     assert res.time_offset_std[-1, 0] < 0.003
