@@ -309,7 +309,11 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
         if cfg.estimate_time_offset:
             P0[ekf.td_index(r)] = cfg.time_offset_std**2
         if cfg.estimate_extrinsic_rotation:
-            P0[ekf.phi_slice(r)] = cfg.extrinsic_rotation_std**2
+            # A planar ego-velocity (v_x, v_y only) sees the radar's yaw, not its roll and
+            # pitch: those would only wander, so they stay at the calibration's.
+            sl = ekf.phi_slice(r)
+            P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if planar[r] \
+                else cfg.extrinsic_rotation_std**2
     ekf.P = np.diag(P0)
 
     # -- the event loop ----------------------------------------------------------------------
