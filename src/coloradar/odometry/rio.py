@@ -69,6 +69,9 @@ class RioConfig:
         Estimate each radar's time offset ``t_d`` online.
     time_offset, time_offset_std
         Its initial value and uncertainty [s].
+    time_offset_warmup
+        Seconds after the start before the time offset is estimated (until then it is held
+        at ``time_offset``): errors of the initial state are not to be read as an offset.
     estimate_extrinsic_rotation
         Estimate each radar's rotation relative to the IMU online (the calibration's as prior).
     extrinsic_rotation_std
@@ -85,6 +88,10 @@ class RioConfig:
     moving_tilt_std
         Roll/pitch uncertainty after aligning while the rig moves [rad] (at rest it follows
         from ``accel_bias_std``).
+    max_rejected
+        After this many consecutive rejected frames per radar, with no update of any radar
+        accepted in between, the filter has lost the radars: its velocity restarts from the
+        next frame's measurement (counted as ``resets``).
     """
 
     accel_noise_density: float = 100e-6 * _G0
@@ -98,6 +105,7 @@ class RioConfig:
     estimate_time_offset: bool = True
     time_offset: float = 0.0
     time_offset_std: float = 0.05
+    time_offset_warmup: float = 3.0
     estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
@@ -105,15 +113,18 @@ class RioConfig:
     zupt_std: float = 0.005
     align_window: float = 0.5
     moving_tilt_std: float = 3.0 * _DEG
+    max_rejected: int = 5
 
     def __post_init__(self) -> None:
         for name in ("accel_noise_density", "gyro_noise_density", "accel_bias_walk",
                      "gyro_bias_walk", "accel_bias_std", "gyro_bias_std",
                      "velocity_noise_floor", "time_offset_std", "extrinsic_rotation_std",
-                     "planar_vz_std", "zupt_std", "align_window", "moving_tilt_std"):
+                     "planar_vz_std", "zupt_std", "align_window", "time_offset_warmup", "moving_tilt_std"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise SettingsError(f"RioConfig.{name} must be a finite number >= 0, got {v!r}")
+        if self.max_rejected < 1:
+            raise SettingsError(f"max_rejected must be >= 1, got {self.max_rejected}")
         if not 0 < self.gate_probability <= 1:
             raise SettingsError(f"gate_probability must be in (0, 1], got {self.gate_probability}")
 
@@ -151,7 +162,8 @@ class RioResult:
     static
         bool ``(M,)``: frames found static (zero-velocity update applied).
     stats
-        Counts per radar: ``updates``, ``rejected``, ``zupts``, ``failed`` (no ego-velocity).
+        Counts per radar: ``updates``, ``rejected``, ``zupts``, ``failed`` (no ego-velocity),
+        ``resets`` (velocity restarted after ``max_rejected`` rejections in a row).
     """
 
     trajectory: Trajectory
@@ -306,8 +318,6 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     P0[TH] = [tilt**2, tilt**2, (1e-3) ** 2]
     P0[BA] = cfg.accel_bias_std**2
     for r in range(n_r):
-        if cfg.estimate_time_offset:
-            P0[ekf.td_index(r)] = cfg.time_offset_std**2
         if cfg.estimate_extrinsic_rotation:
             # A planar ego-velocity (v_x, v_y only) sees the radar's yaw, not its roll and
             # pitch: those would only wander, so they stay at the calibration's.
@@ -328,22 +338,36 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     out_cov = np.zeros((m, 6, 6))
     out_b = np.zeros((m, 4, 3))
     out_td = np.zeros((m, 2, n_r))
-    stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0} for n in names}
+    stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0}
+             for n in names}
     gate3 = float(chi2.ppf(cfg.gate_probability, 3)) if cfg.gate_probability < 1 else None
     gates = {3: gate3}
     last_zaru = t0
     sig_w2 = cfg.gyro_noise_density**2
+    last_out = -np.inf
+    rejected_run = 0                              # radar frames rejected since any acceptance
+    td_on = np.zeros(n_r, dtype=bool)
     for stamp, r, k in events:
         tr = tr_list[r]
         tau = max(stamp + ekf.td[r], ekf.t)
+        if r == 0 and tau <= last_out:
+            tau = last_out + 1e-6                 # poses strictly in time order
         if tau > imu_t[-1]:
             break
         ekf.propagate(tau)
         st = stats[names[r]]
+        if cfg.estimate_time_offset and not td_on[r] and tau - t0 >= cfg.time_offset_warmup:
+            # The time offset is estimated once the filter has settled: right after the
+            # start, errors of the initial state would be read as a time offset.
+            j = ekf.td_index(r)
+            ekf.P[j, :] = ekf.P[:, j] = 0.0
+            ekf.P[j, j] = cfg.time_offset_std**2
+            td_on[r] = True
         if static[r][k]:
             H = np.zeros((3, ekf.dim))
             H[:, V] = np.eye(3)
             acc, _ = ekf.update(-ekf.v, H, np.eye(3) * cfg.zupt_std**2, gates[3])
+            rejected_run = 0 if acc else rejected_run
             sel = (imu_t > last_zaru) & (imu_t <= tau)
             if sel.sum() >= 3:
                 Hg = np.zeros((3, ekf.dim))
@@ -365,11 +389,25 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
                 C[2, 2] = cfg.planar_vz_std**2
             acc, _ = ekf.update(tr.velocity[k] - y, H, C, gates[3])
             st["updates" if acc else "rejected"] += 1
+            rejected_run = 0 if acc else rejected_run + 1
+            if rejected_run >= cfg.max_rejected * n_r:
+                # The filter has lost the radars (every frame of every radar for a while is
+                # an outlier): restart the velocity from this one, with its uncertainty.
+                w, _ = ekf.angular_state(tau)
+                u = ekf.R_ir[r] @ tr.velocity[k] - np.cross(w, t_ir[r])
+                ekf.v = ekf.R @ u
+                ekf.P[V, :] = 0.0
+                ekf.P[:, V] = 0.0
+                ekf.P[V, V] = ekf.R @ (ekf.R_ir[r] @ C @ ekf.R_ir[r].T) @ ekf.R.T \
+                    + np.eye(3) * cfg.velocity_noise_floor**2
+                rejected_run = 0
+                st["resets"] += 1
             last_zaru = tau
         else:
             st["failed"] += 1
         if r == 0:
             i = k - k0
+            last_out = tau
             out_t[i] = tau
             out_R[i], out_p[i], out_v[i] = ekf.R, ekf.p, ekf.v
             rb = ekf.R @ imu_T_base.translation
