@@ -43,10 +43,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--estimator", choices=ESTIMATORS, default="rio",
                    help="rio: the radar-inertial error-state EKF (default); dead-reckoning: "
                         "ego-velocities integrated with the gyro attitude (the baseline)")
-    p.add_argument("--fuse", choices=("cascade", "single_chip"), action="append", default=[],
+    p.add_argument("--fuse", choices=("cascade", "single_chip"), action="append", default=None,
                    metavar="RADAR",
-                   help="also update the filter with this radar's ego-velocities (e.g. "
-                        "--fuse single_chip beside the cascade); repeatable")
+                   help="filter: also update it with this radar's ego-velocities (default: "
+                        "the other radar when the run has its data)")
+    p.add_argument("--no-fuse", action="store_true",
+                   help="filter: use the --radar radar only")
     p.add_argument("--no-time-offset", action="store_true",
                    help="filter: do not estimate the radar-IMU time offset")
     p.add_argument("--time-offset", type=float, default=0.0, metavar="S",
@@ -109,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
                        duration=args.duration, stride=args.stride, seed=args.seed,
                        gyro_bias_window=args.gyro_bias_window, overwrite=args.overwrite,
                        progress=progress, estimator=args.estimator, rio_config=rio,
-                       fuse=tuple(args.fuse))
+                       fuse=() if args.no_fuse else
+                       ("auto" if args.fuse is None else tuple(args.fuse)))
     tr, traj = res.track, res.trajectory
     dist = float(path_length(traj.translations)[-1])
     print(f"{seq.name}: {int(tr.ok.sum())}/{len(tr)} {args.radar} frames with an ego-velocity; "

@@ -223,7 +223,7 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
                  seed: int = 0, gyro_bias_window: float | None = None,
                  overwrite: bool = False, progress: Progress | None = None,
                  estimator: str = "rio", rio_config: RioConfig | None = None,
-                 fuse: Sequence[str] = ()) -> OdometryOutput:
+                 fuse: Sequence[str] | str = "auto") -> OdometryOutput:
     """Ego-velocity and radar-inertial odometry for a run, written to ``out``.
 
     Parameters
@@ -252,7 +252,9 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
         Filter settings (:class:`~coloradar.odometry.rio.RioConfig`).
     fuse
         Further radars whose ego-velocities also update the filter (``"rio"`` only), e.g.
-        ``("single_chip",)`` beside the cascade; each with its default source and settings.
+        ``("single_chip",)`` beside the cascade, each with its default source and settings;
+        ``"auto"`` (default): the other radar when the run has data of it (the filter fuses
+        both radars), none for dead reckoning; ``()``: the one radar only.
 
     Returns
     -------
@@ -266,6 +268,11 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     if orientation not in ORIENTATION_SOURCES:
         raise ColoradarError(f"unknown orientation source {orientation!r}; expected one of "
                              f"{', '.join(ORIENTATION_SOURCES)}")
+    if isinstance(fuse, str):
+        if fuse != "auto":
+            raise SettingsError(f"fuse must be 'auto' or a list of radars, got {fuse!r}")
+        fuse = tuple(r for r in ("cascade", "single_chip") if r != radar
+                     and default_point_source(seq, r) is not None) if estimator == "rio" else ()
     fuse = tuple(fuse)
     if estimator == "rio":
         if orientation != "imu":
