@@ -33,6 +33,7 @@ from scipy.stats import chi2
 from ..calib import Calibration
 from ..errors import ColoradarError, DataWarning, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base
+from .dead_reckoning import integrate_gyro
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
 from .velocity_track import EgoVelocityTrack
@@ -88,6 +89,10 @@ class RioConfig:
     moving_tilt_std
         Roll/pitch uncertainty after aligning while the rig moves [rad] (at rest it follows
         from ``accel_bias_std``).
+    anchor_delay
+        The output is anchored at the initial pose with the attitude estimated this many
+        seconds after the start, carried back by the gyro (the first estimate is the least
+        certain) [s].
     max_rejected
         After this many consecutive rejected frames per radar, with no update of any radar
         accepted in between, the filter has lost the radars: its velocity restarts from the
@@ -114,12 +119,14 @@ class RioConfig:
     align_window: float = 0.5
     moving_tilt_std: float = 3.0 * _DEG
     max_rejected: int = 5
+    anchor_delay: float = 5.0
 
     def __post_init__(self) -> None:
         for name in ("accel_noise_density", "gyro_noise_density", "accel_bias_walk",
                      "gyro_bias_walk", "accel_bias_std", "gyro_bias_std",
                      "velocity_noise_floor", "time_offset_std", "extrinsic_rotation_std",
-                     "planar_vz_std", "zupt_std", "align_window", "time_offset_warmup", "moving_tilt_std"):
+                     "planar_vz_std", "zupt_std", "align_window", "time_offset_warmup",
+                     "anchor_delay", "moving_tilt_std"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise SettingsError(f"RioConfig.{name} must be a finite number >= 0, got {v!r}")
@@ -434,7 +441,20 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     if initial_pose is None:
         initial_pose = (groundtruth.at(out_t[0]) if groundtruth is not None
                         and groundtruth.covers(out_t[:1])[0] else SE3.identity())
-    a_rot = initial_pose.rotation * rot_base[0].inv()
+    # The first attitude estimate is the least certain (gravity alignment, possibly while
+    # moving); the anchor uses the attitude `anchor_delay` seconds later carried back by the
+    # bias-corrected gyro, so that a start-up tilt error does not tilt the whole trajectory.
+    c = int(np.searchsorted(out_t, out_t[0] + cfg.anchor_delay))
+    c = min(c, len(out_t) - 1)
+    if c > 0:
+        sel = (imu_t > out_t[0]) & (imu_t < out_t[c])
+        tg = np.concatenate([[out_t[0]], imu_t[sel], [out_t[c]]])
+        _, wg = ekf.imu_at(tg)
+        back = integrate_gyro(tg, wg, bias=out_b[c, 2])[-1]     # imu(t0)_R_imu(tc)
+        rot0 = Rotation.from_matrix(out_R[c]) * back.inv() * imu_T_base.rotation
+    else:
+        rot0 = rot_base[0]
+    a_rot = initial_pose.rotation * rot0.inv()
     a_t = initial_pose.translation - a_rot.apply(pos_base[0])
     traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
                       f"{names[0]} radar-inertial EKF")
