@@ -29,7 +29,13 @@ import numpy as np
 from .. import __version__
 from ..calib import RadarCalib
 from ..dsp.points import POINT_SOURCES, default_point_source, radar_point_stream
-from ..errors import ColoradarError, MissingDataError, OutputExistsError, SettingsError
+from ..errors import (
+    ColoradarError,
+    MissingDataError,
+    OutputExistsError,
+    SettingsError,
+    WriteError,
+)
 from ..formats.atomic import atomic_write_text, make_output_dir
 from ..geometry import Trajectory, trajectory_from_groundtruth, window_indices
 from .dead_reckoning import ORIENTATION_SOURCES, estimate_gyro_bias, radar_inertial_odometry
@@ -216,6 +222,16 @@ class OdometryOutput:
     files: list[Path]
 
 
+def _check_output_folder(folder: Path) -> None:
+    """Refuse an output folder that is, or lies under, a file before any work is done."""
+    for q in (folder, *folder.parents):
+        if q.exists():
+            if not q.is_dir():
+                raise WriteError(f"{q}: expected an output folder, found a file" if q == folder
+                                 else f"{folder}: cannot be created, {q} is a file")
+            return
+
+
 def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
                  source: str | None = None, orientation: str = "imu",
                  config: EgoVelocityConfig | None = None, processing: dict | None = None,
@@ -288,6 +304,7 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     elif fuse:
         raise SettingsError("fuse (--fuse) needs the filter (estimator 'rio')")
     folder = Path(out)
+    _check_output_folder(folder)
     names = [VELOCITY_FILE, TRAJECTORY_FILE, INFO_FILE] + [f"ego_velocity_{r}.csv" for r in fuse]
     targets = [folder / n for n in names]
     existing = [p.name for p in targets if p.exists()]
