@@ -278,7 +278,7 @@ def test_filter_is_consistent_nees_within_chi_square_bounds():
     """Average NEES of velocity, attitude and both biases (12 dof) over Monte Carlo runs lies
     within the two-sided 99 % chi-square bounds (Bar-Shalom, Li & Kirubarajan 2001, §5.4)."""
     cfg = RioConfig()
-    runs = 12
+    runs = 30
     nees = np.array([_nees_run(s, cfg) for s in range(runs)])
     dof = 12
     lo, hi = chi2.ppf([0.005, 0.995], runs * dof) / runs
