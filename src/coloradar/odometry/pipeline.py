@@ -270,7 +270,8 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
         Further radars whose ego-velocities also update the filter (``"rio"`` only), e.g.
         ``("single_chip",)`` beside the cascade, each with its default source and settings;
         ``"auto"`` (default): the other radar when the run has data of it (the filter fuses
-        both radars), none for dead reckoning; ``()``: the one radar only.
+        both radars), none for dead reckoning; ``()``: the one radar only. ``processing``
+        applies to ``radar`` only; fused radars use their default processing.
 
     Returns
     -------
@@ -353,7 +354,7 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     if estimator == "rio":
         tracks, stills = [track], [still]
         for r in fuse:
-            tr_r, st_r = _ego_velocity(seq, r, None, config=None, processing=processing,
+            tr_r, st_r = _ego_velocity(seq, r, None, config=None, processing=None,
                                        start=start, duration=duration, stride=stride,
                                        max_frames=None, seed=seed, progress=None,
                                        still_config=rcfg.zero_velocity)
