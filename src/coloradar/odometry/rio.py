@@ -334,8 +334,10 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     ekf.P = np.diag(P0)
 
     # -- the event loop ----------------------------------------------------------------------
+    # Frames of the other radars from before the start are old news: left out.
     events = sorted((float(tr.timestamps[k]), r, k) for r, tr in enumerate(tr_list)
-                    for k in range(len(tr)) if (r > 0 or k >= k0))
+                    for k in range(len(tr))
+                    if (k >= k0 if r == 0 else tr.timestamps[k] + cfg.time_offset >= t0))
     m = len(prim) - k0
     out_t = np.full(m, np.nan)
     out_stamp = prim.timestamps[k0:].copy()
