@@ -28,8 +28,23 @@ import scipy.fft as sfft
 from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
 from ..errors import FormatError, SettingsError
-from .angle import bartlett_spectrum, capon_spectrum, refine_peak
-from .array import OVERLAP_MODES, OverlapMode, angle_grid, combine_channels, sines_to_unit
+from .angle import (
+    azimuth_peaks,
+    azimuth_sidelobe_ratio,
+    bartlett_spectrum,
+    capon_spectrum,
+    newton_refine,
+    refine_peak,
+    steering,
+)
+from .array import (
+    OVERLAP_MODES,
+    OverlapMode,
+    angle_grid,
+    combine_channels,
+    phase_centre,
+    sines_to_unit,
+)
 from .cfar import (
     CFAR_KINDS,
     CFAREdge,
@@ -40,7 +55,7 @@ from .cfar import (
     power_correlation,
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
-from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_mask
+from .detect import Detections, channel_noise, sidelobe_envelope, sidelobe_pairs
 from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
@@ -124,7 +139,25 @@ class ProcessingSettings:
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping
-        Keep only detections that are local maxima of the range–Doppler power (3×3).
+        Group the cells of one target into one point: CFAR cells that peak along Doppler or
+        along range are examined, and a point is kept only where its cell's beam, steered at
+        the point's direction, is not smaller than that of any of the 8 neighbouring
+        range–Doppler cells (so a target one bin from a stronger one in another direction
+        stays). False: every CFAR cell makes points.
+    multi_peak
+        Every significant peak of a cell's azimuth profile becomes a point (two scatterers
+        at one range and range rate, as a wall on each side of a corridor): a peak counts
+        when it is above the array's peak sidelobe level times ``angle_sidelobe_margin_db``
+        relative to the cell's strongest peak, and above the beam noise at ``angle_pfa``.
+        False: one point per cell (its strongest peak).
+    angle_sidelobe_margin_db
+        Margin [dB] above the array's own azimuth peak sidelobe level (computed from the
+        antenna layout) that a secondary angle peak needs.
+    angle_pfa
+        Probability that noise alone makes a secondary angle peak in a cell.
+    angle_refine
+        Refine each direction off the grid by Newton steps on the Bartlett beam power
+        (``angle_method="fft"``), after the log-parabola on the grid.
     angle_method
         ``"fft"`` (Bartlett) or ``"capon"`` (MVDR per detection, see :mod:`coloradar.dsp.angle`).
     angle_oversample
@@ -170,6 +203,10 @@ class ProcessingSettings:
     sidelobe_margin_db: float = 6.0
     min_range: float = 0.3
     peak_grouping: bool = True
+    multi_peak: bool = True
+    angle_sidelobe_margin_db: float = 3.0
+    angle_pfa: float = 1e-3
+    angle_refine: bool = True
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
@@ -191,6 +228,8 @@ class ProcessingSettings:
         if not self.doppler_unwrap >= 0:
             raise SettingsError(f"doppler_unwrap must be >= 0 m/s (0 = off), got "
                                 f"{self.doppler_unwrap!r}")
+        if not 0.0 < self.angle_pfa < 1.0:
+            raise SettingsError(f"angle_pfa must lie in (0, 1), got {self.angle_pfa!r}")
         if self.angle_oversample < 1 or self.capon_loading <= 0:
             raise SettingsError("angle_oversample must be >= 1 and capon_loading > 0")
         for name in ("cfar_guard", "cfar_train"):
@@ -362,6 +401,19 @@ class RadarProcessor:
         self._env_d = sidelobe_envelope(window(s.doppler_window, nc), nd, nd // 2 + 1)
         self._env_r = sidelobe_envelope(window(s.range_window, ns), self.range_fft_size,
                                         self.num_range_bins)
+        # Where a point is: range and direction are measured from the virtual array's phase
+        # centre; the Doppler shift within a chirp moves the beat frequency (f_c·v/S of range).
+        self._centre = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        self._range_doppler = float(w.center_frequency / w.slope)
+        # Secondary angle peaks: above the array's sidelobes and above the beam noise
+        # (exponential beam power; about one independent beam per unique element).
+        dg = self.detection_grid
+        self._azimuth_sidelobe = azimuth_sidelobe_ratio(dg)
+        self._angle_relative = self._azimuth_sidelobe * 10.0 ** (s.angle_sidelobe_margin_db / 10)
+        self._angle_floor = float(np.log(dg.num_elements / s.angle_pfa))
+        # The last processed range bin: a tone within half a bin of it gives at most this
+        # power ratio to the bin before (window main lobe); beyond it, more.
+        self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
 
     # ------------------------------------------------------------------ cubes
     def _check(self, adc: np.ndarray) -> np.ndarray:
@@ -476,7 +528,7 @@ class RadarProcessor:
         hyps = self._aliases
         if hyps.size < 2:
             return self._heatmap(rd)
-        stat, _, looks = self._detection_map(rd)
+        stat, _, looks, _ = self._detection_map(rd)
         mask, _ = self._cfar_mask(stat, looks)
         d, r = np.nonzero(mask)
         if d.size == 0:
@@ -521,22 +573,24 @@ class RadarProcessor:
         rcube = self._range_cube(adc)
         return self._detect(rcube, self._doppler(rcube))
 
-    def _detection_map(self, rd: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), and
-        the looks the CFAR threshold is computed for (``noise_weighting``)."""
+    def _detection_map(self, rd: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
+        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), the
+        looks the CFAR threshold is computed for (``noise_weighting``), and the channels'
+        noise powers (float64 ``(tx·rx,)``; None without whitening)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
         mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
         np.square(mag2, out=mag2)
         plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
-            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks
+            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks, None
         # Inverse-noise weights: each term a unit exponential times the mean noise power, so
         # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
                              int(np.ceil(s.min_range / self.range_bin_width)))
         wts = (sig2.mean() / sig2).astype(np.float32)
-        return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks
+        return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks, sig2
 
     def _cfar_mask(self, stat: np.ndarray, looks: int) -> tuple[np.ndarray, np.ndarray]:
         """CFAR on the detection statistic: bool mask and noise estimate, ``(doppler, range)``
@@ -559,25 +613,30 @@ class RadarProcessor:
 
     def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
         s = self.settings
-        stat, plain, looks = self._detection_map(rd)
-        modes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror")   # (Doppler, range)
+        stat, plain, looks, sig2 = self._detection_map(rd)
         mask, noise = self._cfar_mask(stat, looks)
-        if s.peak_grouping:
-            mask &= local_maxima(stat, modes)
-        d, r = np.nonzero(mask)
-        if s.sidelobe_guard and d.size > 1:
-            # Candidates inside min_range still explain sidelobes, so the cut comes after.
-            keep = sidelobe_mask(d, r, stat[d, r], stat[d, r] - noise[d, r], self._env_d,
-                                 self._env_r, stat.shape[0], 10.0 ** (s.sidelobe_margin_db / 10))
-            d, r = d[keep], r[keep]
-        near = r < int(np.ceil(s.min_range / self.range_bin_width))
-        d, r = d[~near], r[~near]
         nd, nr = stat.shape
+        if s.peak_grouping:
+            # Cells that peak along Doppler or along range: a target one bin from a stronger
+            # one (in the other axis) is no 2D maximum of the summed power, but it is one of
+            # its own beam; the beam test below decides (docs/dsp.md, "Grouping").
+            along_d = (stat >= np.roll(stat, 1, axis=0)) & (stat >= np.roll(stat, -1, axis=0))
+            up = np.empty_like(stat)
+            up[:, :-1] = stat[:, 1:]
+            up[:, -1] = -np.inf
+            down = np.empty_like(stat)
+            down[:, 1:] = stat[:, :-1]
+            down[:, 0] = -np.inf
+            along_r = (stat >= up) & (stat >= down)
+            mask &= along_d | along_r
+        d, r = np.nonzero(mask)
+        near = r < int(np.ceil(s.min_range / self.range_bin_width))
+        # Cells inside min_range still explain sidelobes (guard below); they make no points.
+        exp_d, exp_r = d, r
+        exp_pow, exp_excess = stat[d, r], stat[d, r] - noise[d, r]
+        d, r = d[~near], r[~near]
         d_ref = refine_peak(np.stack([stat[(d - 1) % nd, r], stat[d, r],
                                       stat[(d + 1) % nd, r]], axis=1), d, nd, wrap=True)
-        r_ref = refine_peak(np.stack([stat[d, np.maximum(r - 1, 0)], stat[d, r],
-                                      stat[d, np.minimum(r + 1, nr - 1)]], axis=1),
-                            r, nr, wrap=False)
         k_signed = d_ref - nd // 2
         ntx = rd.shape[0]
         vecs = rd[:, :, d, r]                                           # (tx, rx, K)
@@ -587,8 +646,8 @@ class RadarProcessor:
         alias, spec = self._choose_alias(vecs, k_signed)
         if alias is not None:
             vecs = vecs * alias_phase(ntx, alias)[:, None, :]
+        vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T  # (K, M)
         if s.angle_method == "capon" and d.size:
-            vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             snaps = rcube[:, :, :, r]                                    # (tx, rx, chirp, K)
             if self._tdm is not None:
                 ph = tdm_phase(ntx, k_signed, nd)
@@ -599,23 +658,142 @@ class RadarProcessor:
             spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
                                   s.capon_loading, workers=s.workers)
         elif spec is None:
-            vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
-        uy, uz, peak = self._peak_directions(spec)
-        if s.beam_doppler and d.size:
-            d_ref = self._beam_doppler(rd, d, r, alias, uy, uz)
-            k_signed = d_ref - nd // 2
-        rng = r_ref * self.range_bin_width
+        # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
+        # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
+        beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
+        if s.multi_peak:
+            ci, ie, ia = azimuth_peaks(spec, self._visible, self._angle_relative,
+                                       self._angle_floor * beam_noise)
+        else:
+            ci = np.arange(d.size)
+            ci, ie, ia = azimuth_peaks(spec, self._visible, np.inf, np.full(d.size, np.inf))
+        uy, uz, peak = self._peak_directions(spec, ci, ie, ia)
+        if s.angle_method == "fft" and s.angle_refine and ci.size:
+            g = self.detection_grid
+            uy, uz, peak = newton_refine(g, vectors[ci], uy, uz,
+                                         (2.0 / (g.num_az * g.rho), 2.0 / (g.num_el * g.rho)))
+        pd, pr = d[ci], r[ci]
+        palias = alias[ci] if alias is not None else None
+        # Beam of the 3×3 range–Doppler neighbourhood at each point's direction.
+        nb = self._beam_neighbourhood(rd, pd, pr, palias, uy, uz)      # (P, 3, 3)
+        keep = np.ones(ci.size, dtype=bool)
+        if s.peak_grouping and ci.size:
+            # A point is a maximum of its own beam over its neighbours: a target one bin from
+            # a stronger one in another direction stays, the skirt of one target goes.
+            centre = nb[:, 1, 1]
+            keep &= np.all(nb.reshape(-1, 9) <= centre[:, None] * (1 + 1e-6), axis=1)
+        if nr > 1 and ci.size:
+            # A return beyond the last processed bin leaks into it with a slope no target
+            # inside (within half a bin of it) can make.
+            last = pr == nr - 1
+            keep &= ~(last & (nb[:, 1, 1] > self._edge_ratio * nb[:, 1, 0]))
+        if s.sidelobe_guard and ci.size and exp_d.size > 1:
+            keep &= self._guard(rd, pd, pr, palias, uy, uz, nb[:, 1, 1] - beam_noise[ci],
+                                stat[pd, pr] - noise[pd, pr], exp_d, exp_r, exp_pow,
+                                exp_excess, stat[pd, pr])
+        ci, pd, pr, uy, uz, peak, nb = ci[keep], pd[keep], pr[keep], uy[keep], uz[keep], \
+            peak[keep], nb[keep]
+        palias = palias[keep] if palias is not None else None
+        r_ref = refine_peak(nb[:, 1, :], pr, nr, wrap=False)
+        if s.beam_doppler:
+            dref = refine_peak(nb[:, :, 1], pd, nd, wrap=True)
+        else:
+            dref = d_ref[ci]
+        k_true = dref - nd // 2 + (palias * nd if palias is not None else 0)
+        rate = k_true * (self.velocities[1] - self.velocities[0])
+        # Range–Doppler coupling: the Doppler shift within a chirp raises the beat frequency
+        # by 2·f_c·v/c, which the range FFT reads as f_c·v/S of range.
+        rng_c = r_ref * self.range_bin_width - rate * self._range_doppler
         unit = sines_to_unit(uy, uz)
-        xyz = rng[:, None] * unit
-        k_true = k_signed + (alias * nd if alias is not None else 0)
+        # Range and direction are measured from the virtual array's phase centre.
+        xyz = self._centre[None, :] + rng_c[:, None] * unit
+        rng = np.linalg.norm(xyz, axis=1)
         flat = plain.reshape(nd, nr)
         return Detections(
-            range_bin=r.astype(np.int64), doppler_bin=d.astype(np.int64), range=rng,
-            range_rate=k_true * (self.velocities[1] - self.velocities[0]),
-            azimuth=np.arctan2(unit[:, 1], unit[:, 0]), elevation=np.arcsin(unit[:, 2]),
-            xyz=xyz, intensity=peak, power=flat[d, r].astype(np.float64),
-            snr=stat[d, r] / noise[d, r], alias=alias)
+            range_bin=pr.astype(np.int64), doppler_bin=pd.astype(np.int64), range=rng,
+            range_rate=rate, azimuth=np.arctan2(xyz[:, 1], xyz[:, 0]),
+            elevation=np.arcsin(np.clip(xyz[:, 2] / np.maximum(rng, 1e-12), -1.0, 1.0)),
+            xyz=xyz, intensity=peak, power=flat[pd, pr].astype(np.float64),
+            snr=stat[pd, pr] / noise[pd, pr], alias=palias)
+
+    def _beam_noise_factor(self, sig2: np.ndarray | None) -> float:
+        """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""
+        m = self.detection_grid.num_elements
+        if sig2 is None:
+            return 1.0 / (m * self._looks)
+        first = self.calib.antenna.virtual.first_pair
+        nrx = self.calib.antenna.num_rx
+        used = sig2[first[:, 0] * nrx + first[:, 1]]
+        return float(used.sum() / (m * m * sig2.sum()))
+
+    def _beam_neighbourhood(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
+                            alias: np.ndarray | None, uy: np.ndarray, uz: np.ndarray
+                            ) -> np.ndarray:
+        """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
+        around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
+
+        Each Doppler bin keeps its own TDM compensation (across the Doppler edge that of the
+        unwrapped neighbour) and the point's alias; range neighbours beyond the map repeat
+        the edge cell.
+        """
+        ntx, _, nd, nr = rd.shape
+        p = d.size
+        out = np.zeros((p, 3, 3))
+        if p == 0:
+            return out
+        steer = steering(self.detection_grid, uy, uz)                  # (M, P)
+        m2 = float(self.detection_grid.num_elements) ** 2
+        for i, j in enumerate((-1, 0, 1)):
+            dn = (d + j) % nd
+            ph = None
+            if self._tdm is not None:
+                ph = tdm_phase(ntx, (d + j - dn).astype(np.float64), nd)
+            if alias is not None:
+                a = alias_phase(ntx, alias)
+                ph = a if ph is None else ph * a
+            for k, jr in enumerate((-1, 0, 1)):
+                rn = np.clip(r + jr, 0, nr - 1)
+                v = rd[:, :, dn, rn]
+                if ph is not None:
+                    v = v * ph[:, None, :]
+                el = combine_channels(v, self.calib.antenna.virtual, self.settings.overlap)
+                out[:, i, k] = np.abs(np.einsum("mp,mp->p", el, steer)) ** 2 / m2
+        return out
+
+    def _guard(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray, alias: np.ndarray | None,
+               uy: np.ndarray, uz: np.ndarray, beam_excess: np.ndarray,
+               cell_excess: np.ndarray, exp_d: np.ndarray, exp_r: np.ndarray,
+               exp_pow: np.ndarray, exp_excess: np.ndarray, cell_pow: np.ndarray
+               ) -> np.ndarray:
+        """Sidelobe guard on points: True = keep.
+
+        First on the summed power (:func:`~coloradar.dsp.detect.sidelobe_pairs`): which
+        stronger cells, two or more bins away, could explain a point's cell by the windows'
+        worst-case leakage. Then per such pair in the point's own direction: leakage of cell
+        ``j`` into the point's cell is ``E_d·E_r`` times ``j``'s beam, so the point stays
+        when its beam power above the noise exceeds the margin times ``E_d·E_r·B_j(u)``;
+        a weaker target in another direction is then kept beside a strong one.
+        """
+        s = self.settings
+        margin = 10.0 ** (s.sidelobe_margin_db / 10)
+        pi, pj, leak = sidelobe_pairs(d, r, cell_pow, cell_excess, exp_d, exp_r, exp_pow,
+                                      self._env_d, self._env_r, rd.shape[2], margin)
+        keep = np.ones(d.size, dtype=bool)
+        if pi.size == 0:
+            return keep
+        ntx = rd.shape[0]
+        jd, jr = exp_d[pj], exp_r[pj]
+        v = rd[:, :, jd, jr]
+        if alias is not None:
+            v = v * alias_phase(ntx, alias[pi])[:, None, :]
+        el = combine_channels(v, self.calib.antenna.virtual, s.overlap)
+        steer = steering(self.detection_grid, uy[pi], uz[pi])
+        bj = np.abs(np.einsum("mp,mp->p", el, steer)) ** 2 / float(
+            self.detection_grid.num_elements) ** 2
+        explained = beam_excess[pi] < margin * leak * bj
+        keep[pi[explained]] = False
+        return keep
 
     def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -659,54 +837,19 @@ class RadarProcessor:
         best = np.argmax(score, axis=1) if k else np.zeros(0, dtype=np.int64)
         return hyps[best], spectra
 
-    def _beam_doppler(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
-                      alias: np.ndarray | None, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
-        """Sub-bin Doppler of each detection from the beam steered at its direction.
-
-        The power map sums all directions, so a cell of an extended surface (floor, wall) mixes
-        scatterers of many range rates, and its Doppler peak is pulled off the range rate of
-        the direction the angle spectrum found (docs/dsp.md, "Beam-steered Doppler"). The
-        beam at that direction keeps only its neighbourhood. Returns float64 ``(K,)``
-        refined Doppler bins, as the power-map refinement.
-        """
-        ntx = rd.shape[0]
-        nd = rd.shape[2]
+    def _peak_directions(self, spec: np.ndarray, k: np.ndarray, ie: np.ndarray, ia: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Direction sines of spectrum peaks ``(k, ie, ia)`` refined by log-parabolas along
+        both axes of the ``(K, el, az)`` spectra, and the peak values."""
         g = self.detection_grid
-        cols = []
-        for j in (-1, 0, 1):
-            dn = (d + j) % nd
-            v = rd[:, :, dn, r]
-            if self._tdm is not None:
-                # rd holds the compensation of the wrapped bin dn; a neighbour across the
-                # edge needs that of d + j, one Doppler period (one alias) away.
-                v = v * tdm_phase(ntx, (d + j - dn).astype(np.float64), nd)[:, None, :]
-            if alias is not None:
-                v = v * alias_phase(ntx, alias)[:, None, :]
-            cols.append(combine_channels(v, self.calib.antenna.virtual, self.settings.overlap))
-        # The Bartlett beam at the refined sines: the angle grid's FFT evaluated off-grid,
-        # Σ_m x_m exp(jπρ(s_az·p_az,m·u_y + s_el·p_el,m·u_z)) over unique elements m.
-        phase = np.pi * g.rho * (g.azimuth_sign * g.az_pos[:, None] * uy[None, :]
-                                 + g.elevation_sign * g.el_pos[:, None] * uz[None, :])
-        steer = np.exp(1j * phase).astype(np.complex64)                    # (M, K)
-        p3 = np.stack([np.abs(np.sum(c * steer, axis=0)) ** 2 for c in cols], axis=1)
-        return refine_peak(p3, d, nd, wrap=True)
-
-    def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
-        g = self.detection_grid
-        k = spec.shape[0]
-        masked = np.where(self._visible[None], spec, 0.0)
-        flat = masked.reshape(k, g.num_el * g.num_az).argmax(axis=1) if k else np.zeros(0, int)
-        ie, ia = np.divmod(flat, g.num_az)
-        kk = np.arange(k)
         ne, na = g.num_el, g.num_az
-        fe = refine_peak(np.stack([spec[kk, (ie - 1) % ne, ia], spec[kk, ie, ia],
-                                   spec[kk, (ie + 1) % ne, ia]], axis=1), ie, ne, wrap=True)
-        fa = refine_peak(np.stack([spec[kk, ie, (ia - 1) % na], spec[kk, ie, ia],
-                                   spec[kk, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
+        fe = refine_peak(np.stack([spec[k, (ie - 1) % ne, ia], spec[k, ie, ia],
+                                   spec[k, (ie + 1) % ne, ia]], axis=1), ie, ne, wrap=True)
+        fa = refine_peak(np.stack([spec[k, ie, (ia - 1) % na], spec[k, ie, ia],
+                                   spec[k, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
         uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
         uy = 2.0 * (fa - na // 2) / (na * g.rho)
-        return uy, uz, spec[kk, ie, ia].astype(np.float64)
+        return uy, uz, spec[k, ie, ia].astype(np.float64)
 
     def pointcloud(self, adc: np.ndarray) -> np.ndarray:
         """Point cloud of one frame, float32 ``(N, 5)``: ``x y z intensity range_rate``."""
@@ -739,3 +882,15 @@ def _power_sum(cube: np.ndarray) -> np.ndarray:
     mag = np.abs(cube)
     np.square(mag, out=mag)
     return mag.sum(axis=(0, 1))
+
+
+def _edge_ratio(win: np.ndarray, fft_size: int) -> float:
+    """``|W(½)|² / |W(1½)|²``: power of a tone's cell over the next cell when it lies half a
+    bin beyond the cell centre (``W`` the window's DTFT in FFT bins, zero padding included)."""
+    w = np.asarray(win, dtype=np.float64)
+    k = np.arange(w.size)
+
+    def resp(nu: float) -> float:
+        return float(np.abs(np.sum(w * np.exp(-2j * np.pi * nu * k / fft_size))) ** 2)
+
+    return resp(0.5) / max(resp(1.5), 1e-300)
