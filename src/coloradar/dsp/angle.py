@@ -23,9 +23,11 @@ from __future__ import annotations
 
 import numpy as np
 
+import scipy.fft as sfft
+
 from .array import AngleGrid, beamform
 
-__all__ = ["azimuth_peaks", "azimuth_sidelobe_ratio", "bartlett_spectrum", "capon_spectrum",
+__all__ = ["NearField", "azimuth_peaks", "row_profile", "bartlett_spectrum", "capon_spectrum",
            "covariance", "newton_refine", "refine_peak", "steering"]
 
 
@@ -147,72 +149,59 @@ def steering(grid: AngleGrid, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
     return np.exp(1j * phase).astype(np.complex64)
 
 
-def azimuth_sidelobe_ratio(grid: AngleGrid) -> float:
-    """Peak sidelobe level of the array's azimuth profile, relative to its main lobe (linear).
+def row_profile(grid: AngleGrid, vectors: np.ndarray, workers: int = 1) -> np.ndarray:
+    """Azimuth beam power of the most populated elevation row alone, float32 ``(K, num_az)``.
 
-    The azimuth profile of a spectrum is its maximum over elevation at each azimuth bin. For
-    one point target (equal amplitude on every unique element) that profile is the array's
-    pattern, the same at every steering in direction-sine space; outside the main lobe
-    (from the peak out to the first minimum on each side) its largest value over the peak
-    is the level below which a second peak of a spectrum may be the first one's sidelobe.
+    A row is a line array along azimuth: its spectrum measures ``u_y`` whatever the
+    elevation, and two sources make no ghosts in elevation (the sparse elevation rows do:
+    the 2D spectrum of two sources can peak between them at a wrong elevation). Used to find
+    how many sources a cell holds and their azimuths; the full array refines them.
     """
-    spec = bartlett_spectrum(grid, np.ones((1, grid.num_elements), dtype=np.complex64))[0]
-    prof = np.roll(spec.max(axis=0).astype(np.float64), -int(np.argmax(spec.max(axis=0))))
-    n = prof.size
-    right = 1
-    while right < n // 2 and prof[right + 1] < prof[right]:
-        right += 1
-    left = 1
-    while left < n // 2 and prof[-left - 1] < prof[-left]:
-        left += 1
-    outside = prof[right:n - left + 1]
-    return float(outside.max() / prof[0]) if outside.size else 0.0
+    rows, counts = np.unique(grid.el_pos, return_counts=True)
+    sel = grid.el_pos == rows[np.argmax(counts)]
+    x = np.asarray(vectors)[:, sel]
+    buf = np.zeros((x.shape[0], grid.n_az), dtype=np.complex64)
+    buf[:, grid.az_pos[sel]] = x
+    spec = sfft.fft(buf, axis=1, workers=workers)[:, grid.az_read]
+    mag = np.abs(spec) * np.float32(1.0 / sel.sum())
+    return np.square(mag, out=mag)
 
 
-def azimuth_peaks(spec: np.ndarray, visible: np.ndarray, relative: float, floor: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every significant peak of each spectrum's azimuth profile.
+def azimuth_peaks(profile: np.ndarray, relative: float, floor: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Every significant peak of each azimuth profile.
 
     As TI's cascade DOA (mmWave Studio's ``DOACascade``/``DOA_BF_PeakDet_loc``: several peaks
-    along azimuth, the elevation of each by its maximum), a peak of the azimuth profile
-    (the maximum over elevation per azimuth bin, visible region only; the axis is circular,
-    as an FFT spectrum) counts when it is at least ``relative`` times the strongest peak
-    (above the array's sidelobes) and above ``floor``. The strongest peak always counts.
+    along azimuth, one elevation for each), a local maximum of the profile (the axis is
+    circular, as an FFT spectrum) counts when it is at least ``relative`` times the
+    strongest peak and above ``floor``; the strongest peak always counts.
 
     Parameters
     ----------
-    spec
-        float ``(K, num_el, num_az)`` spectra.
-    visible
-        bool ``(num_el, num_az)``.
+    profile
+        float ``(K, num_az)`` azimuth profiles (invisible bins zeroed).
     relative
         Linear fraction of the strongest peak.
     floor
-        float ``(K,)``: absolute threshold per spectrum (noise).
+        float ``(K,)``: absolute threshold per profile (noise).
 
     Returns
     -------
     tuple
-        int64 arrays ``(k, el, az)`` of the peaks, the strongest of each spectrum first.
+        int64 arrays ``(k, az)`` of the peaks, the strongest of each profile first.
     """
-    k = spec.shape[0]
+    k = profile.shape[0]
     if k == 0:
         e = np.zeros(0, dtype=np.int64)
-        return e, e, e
-    masked = np.where(visible[None], spec, 0.0)
-    prof = masked.max(axis=1)                                           # (K, az)
-    arg_el = masked.argmax(axis=1)
+        return e, e
+    prof = profile
     left, right = np.roll(prof, 1, axis=1), np.roll(prof, -1, axis=1)
     top = prof.max(axis=1, keepdims=True)
-    is_peak = (prof > left) & (prof >= right) & (prof > 0)
-    ok = is_peak & (prof >= relative * top) & (prof >= floor[:, None])
-    best = prof.argmax(axis=1)
-    ok[np.arange(k), best] = True
+    ok = (prof > left) & (prof >= right) & (prof >= relative * top) & (prof >= floor[:, None])
+    ok[np.arange(k), prof.argmax(axis=1)] = True
     kk, ia = np.nonzero(ok)
-    # strongest first within each spectrum
     order = np.lexsort((-prof[kk, ia], kk))
-    kk, ia = kk[order], ia[order]
-    return kk.astype(np.int64), arg_el[kk, ia].astype(np.int64), ia.astype(np.int64)
+    return kk[order].astype(np.int64), ia[order].astype(np.int64)
 
 
 def newton_refine(grid: AngleGrid, vectors: np.ndarray, uy: np.ndarray, uz: np.ndarray,
@@ -293,3 +282,39 @@ def newton_refine(grid: AngleGrid, vectors: np.ndarray, uy: np.ndarray, uz: np.n
         uz = np.where(better, uz + sz, uz)
         p0 = np.where(better, p1, p0)
     return uy, uz, p0 / float(m * m)
+
+
+class NearField:
+    """Focusing phases of the unique virtual elements for a source at a finite range.
+
+    The far-field steering vector assumes plane waves. A (TX, RX) pair whose antennas sit at
+    ``a`` and ``b`` from the array's phase centre sees a source at range ``ρ`` and direction
+    ``u`` (from the phase centre) over the round trip ``2ρ − u·(a + b) + q``,
+    ``q = (|a|² − (u·a)² + |b|² − (u·b)²)/(2ρ)`` (second order in ``|a|/ρ``). The cascade's
+    16 cm aperture has its Fraunhofer distance near 15 m, beyond the processed range, and
+    ``k·q`` reaches a radian across it at 4 m: the far-field beam defocuses (shoulders and
+    raised sidelobes that look like further targets). Multiplying element ``m`` by
+    ``exp(−jk·q_m)`` focuses the beam at ``(ρ, u)``.
+
+    Parameters
+    ----------
+    tx, rx
+        float ``(M, 3)`` [m]: the transmit and receive antenna of each unique element's pair,
+        relative to the phase centre (radar frame, signs applied).
+    wavenumber
+        ``2π f_c / c`` [rad/m].
+    """
+
+    def __init__(self, tx: np.ndarray, rx: np.ndarray, wavenumber: float) -> None:
+        self.tx = np.asarray(tx, dtype=np.float64)
+        self.rx = np.asarray(rx, dtype=np.float64)
+        self.wavenumber = float(wavenumber)
+        self._sq = (self.tx**2).sum(axis=1) + (self.rx**2).sum(axis=1)          # (M,)
+
+    def focus(self, unit: np.ndarray, rng: np.ndarray) -> np.ndarray:
+        """complex64 ``(M, K)``: ``exp(−jk·q_m)`` for directions ``unit`` ``(K, 3)`` and
+        ranges ``rng`` ``(K,)`` [m] from the phase centre."""
+        u = np.asarray(unit, dtype=np.float64)
+        q = (self._sq[:, None] - (self.tx @ u.T) ** 2 - (self.rx @ u.T) ** 2) \
+            / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))[None, :]
+        return np.exp(-1j * self.wavenumber * q).astype(np.complex64)

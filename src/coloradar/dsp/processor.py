@@ -29,8 +29,9 @@ from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
 from ..errors import FormatError, SettingsError
 from .angle import (
+    NearField,
     azimuth_peaks,
-    azimuth_sidelobe_ratio,
+    row_profile,
     bartlett_spectrum,
     capon_spectrum,
     newton_refine,
@@ -42,6 +43,7 @@ from .array import (
     OverlapMode,
     angle_grid,
     combine_channels,
+    pair_antennas,
     phase_centre,
     sines_to_unit,
 )
@@ -122,6 +124,11 @@ class ProcessingSettings:
         alias hypotheses whose range rate stays within it (at most Ntx of them) and keeps the
         best (:mod:`coloradar.dsp.tdm`); 0 switches the search off (folded range rates, and
         angles compensated for the folded Doppler).
+    alias_margin_db
+        Radars without overlapping virtual pairs (the single chip) choose the Doppler alias
+        by the highest beam peak; another hypothesis must beat the folded one by this margin
+        [dB] (two sources in one cell can favour a wrong one by ~1 dB; a wrong hypothesis
+        defocuses a lone source by several).
     heatmap_unwrap
         Heatmaps with disambiguated Doppler: cells that pass the CFAR are compensated for
         their best alias hypothesis before the angle FFT, and channel 1 carries the unwrapped
@@ -146,15 +153,19 @@ class ProcessingSettings:
         stays). False: every CFAR cell makes points.
     multi_peak
         Every significant peak of a cell's azimuth profile becomes a point (two scatterers
-        at one range and range rate, as a wall on each side of a corridor): a peak counts
-        when it is above the array's peak sidelobe level times ``angle_sidelobe_margin_db``
-        relative to the cell's strongest peak, and above the beam noise at ``angle_pfa``.
-        False: one point per cell (its strongest peak).
-    angle_sidelobe_margin_db
-        Margin [dB] above the array's own azimuth peak sidelobe level (computed from the
-        antenna layout) that a secondary angle peak needs.
+        at one range and range rate, as a wall on each side of a corridor): a secondary peak
+        counts when, with the strongest source's response (its sidelobes) removed, what is
+        left in its direction is above the beam noise at ``angle_pfa`` and within
+        ``angle_dynamic_range_db`` of the strongest. False: one point per cell.
     angle_pfa
         Probability that noise alone makes a secondary angle peak in a cell.
+    angle_dynamic_range_db
+        A secondary angle peak of a cell counts only within this many dB of the cell's
+        strongest source, after that source's response is removed (model errors of real
+        arrays: calibration residue, mutual coupling).
+    near_field
+        Focus beams at the detection's range (:class:`~coloradar.dsp.angle.NearField`); the
+        cascade's aperture is in its near field over the whole processed range.
     angle_refine
         Refine each direction off the grid by Newton steps on the Bartlett beam power
         (``angle_method="fft"``), after the log-parabola on the grid.
@@ -198,15 +209,17 @@ class ProcessingSettings:
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
     doppler_unwrap: float = 5.0
+    alias_margin_db: float = 1.5
     heatmap_unwrap: bool = False
     sidelobe_guard: bool = True
     sidelobe_margin_db: float = 6.0
     min_range: float = 0.3
     peak_grouping: bool = True
     multi_peak: bool = True
-    angle_sidelobe_margin_db: float = 3.0
     angle_pfa: float = 1e-3
     angle_refine: bool = True
+    angle_dynamic_range_db: float = 20.0
+    near_field: bool = True
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
@@ -408,9 +421,15 @@ class RadarProcessor:
         # Secondary angle peaks: above the array's sidelobes and above the beam noise
         # (exponential beam power; about one independent beam per unique element).
         dg = self.detection_grid
-        self._azimuth_sidelobe = azimuth_sidelobe_ratio(dg)
-        self._angle_relative = self._azimuth_sidelobe * 10.0 ** (s.angle_sidelobe_margin_db / 10)
         self._angle_floor = float(np.log(dg.num_elements / s.angle_pfa))
+        self._angle_dynamic = 10.0 ** (-s.angle_dynamic_range_db / 10)
+        self._alias_margin = 10.0 ** (-s.alias_margin_db / 10)
+        self._visible_az = np.abs(dg.az_sines) <= 1.0
+        rows, counts = np.unique(dg.el_pos, return_counts=True)
+        self._row_noise = float(dg.num_elements / counts.max())
+        tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        self._near = NearField(tx - self._centre, rx - self._centre,
+                               2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT)
         # The last processed range bin: a tone within half a bin of it gives at most this
         # power ratio to the bin before (window main lobe); beyond it, more.
         self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
@@ -662,21 +681,27 @@ class RadarProcessor:
         # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
         # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
         beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
-        if s.multi_peak:
-            ci, ie, ia = azimuth_peaks(spec, self._visible, self._angle_relative,
-                                       self._angle_floor * beam_noise)
+        floor = self._angle_floor * beam_noise
+        masked = np.where(self._visible[None], spec, 0.0)
+        if s.multi_peak and s.angle_method == "fft":
+            # sources and their azimuths from the filled row; the noise floor of a row beam
+            # is M/M_row times that of the full beam
+            prof = row_profile(self.detection_grid, vectors, workers=s.workers)
+            prof = np.where(self._visible_az[None], prof, 0.0)
+            ci, ia = azimuth_peaks(prof, self._angle_dynamic, floor * self._row_noise)
+        elif s.multi_peak:
+            ci, ia = azimuth_peaks(masked.max(axis=1), self._angle_dynamic, floor)
         else:
-            ci = np.arange(d.size)
-            ci, ie, ia = azimuth_peaks(spec, self._visible, np.inf, np.full(d.size, np.inf))
+            ci, ia = azimuth_peaks(masked.max(axis=1), np.inf, np.full(d.size, np.inf))
+        ie = masked[ci, :, ia].argmax(axis=1)
         uy, uz, peak = self._peak_directions(spec, ci, ie, ia)
-        if s.angle_method == "fft" and s.angle_refine and ci.size:
-            g = self.detection_grid
-            uy, uz, peak = newton_refine(g, vectors[ci], uy, uz,
-                                         (2.0 / (g.num_az * g.rho), 2.0 / (g.num_el * g.rho)))
+        rho = np.maximum(r[ci], 1) * self.range_bin_width
+        x = vectors[ci]                                                 # (P, M)
+        uy, uz, peak, steer, ci = self._resolve_peaks(x, ci, uy, uz, peak, rho, floor)
         pd, pr = d[ci], r[ci]
         palias = alias[ci] if alias is not None else None
         # Beam of the 3×3 range–Doppler neighbourhood at each point's direction.
-        nb = self._beam_neighbourhood(rd, pd, pr, palias, uy, uz)      # (P, 3, 3)
+        nb = self._beam_neighbourhood(rd, pd, pr, palias, steer)       # (P, 3, 3)
         keep = np.ones(ci.size, dtype=bool)
         if s.peak_grouping and ci.size:
             # A point is a maximum of its own beam over its neighbours: a target one bin from
@@ -689,11 +714,12 @@ class RadarProcessor:
             last = pr == nr - 1
             keep &= ~(last & (nb[:, 1, 1] > self._edge_ratio * nb[:, 1, 0]))
         if s.sidelobe_guard and ci.size and exp_d.size > 1:
-            keep &= self._guard(rd, pd, pr, palias, uy, uz, nb[:, 1, 1] - beam_noise[ci],
+            keep &= self._guard(rd, pd, pr, palias, steer, nb[:, 1, 1] - beam_noise[ci],
                                 stat[pd, pr] - noise[pd, pr], exp_d, exp_r, exp_pow,
                                 exp_excess, stat[pd, pr])
         ci, pd, pr, uy, uz, peak, nb = ci[keep], pd[keep], pr[keep], uy[keep], uz[keep], \
             peak[keep], nb[keep]
+        steer = steer[:, keep]
         palias = palias[keep] if palias is not None else None
         r_ref = refine_peak(nb[:, 1, :], pr, nr, wrap=False)
         if s.beam_doppler:
@@ -717,6 +743,107 @@ class RadarProcessor:
             xyz=xyz, intensity=peak, power=flat[pd, pr].astype(np.float64),
             snr=stat[pd, pr] / noise[pd, pr], alias=palias)
 
+    def _steer(self, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray) -> np.ndarray:
+        """Beam weights ``(M, P)`` complex64 at direction sines ``(u_y, u_z)``, focused at range
+        ``rho`` from the phase centre: ``B(u) = Σ_m x_m w_m / M`` is ``s`` for a source
+        ``s`` at ``(rho, u)``."""
+        w = steering(self.detection_grid, uy, uz)
+        if self.settings.near_field:
+            w = w * self._near.focus(sines_to_unit(uy, uz), rho)
+        return w
+
+    def _resolve_peaks(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray, uz: np.ndarray,
+                       peak: np.ndarray, rho: np.ndarray, floor: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Refine the spectrum peaks and decide which secondary peaks are sources.
+
+        ``x`` complex ``(P, M)``: the vector of each peak's cell; ``ci`` the cell of each peak,
+        the strongest of each cell first. The strongest peak of a cell is refined by Newton
+        steps on the focused beam. A secondary peak counts when, with the strongest source's
+        response removed (its amplitude times the array's focused cross pattern), what is
+        left in its direction is above the cell's noise ``floor`` and within
+        ``angle_dynamic_range_db`` of the strongest: sidelobes of the strongest vanish there,
+        a second scatterer does not. Cells with several sources are refined jointly (each
+        source's direction on the vector less the others' least-squares fit).
+
+        Returns
+        -------
+        tuple
+            ``(u_y, u_z, power, weights, ci)`` of the kept peaks; ``weights`` ``(M, P)`` as
+            :meth:`_steer`.
+        """
+        s = self.settings
+        g = self.detection_grid
+        m = float(g.num_elements)
+        step = (2.0 / (g.num_az * g.rho), 2.0 / (g.num_el * g.rho))
+        refine = s.angle_refine and s.angle_method == "fft"
+
+        def newton(xv: np.ndarray, uy0: np.ndarray, uz0: np.ndarray, rr: np.ndarray):
+            if not self.settings.near_field:
+                return newton_refine(g, xv, uy0, uz0, step)
+            f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
+            return newton_refine(g, xv * f, uy0, uz0, step)
+
+        primary = np.ones(ci.size, dtype=bool)
+        primary[1:] = ci[1:] != ci[:-1]
+        if refine and primary.any():
+            uy[primary], uz[primary], peak[primary] = newton(x[primary], uy[primary],
+                                                             uz[primary], rho[primary])
+        w = self._steer(uy, uz, rho)                                    # (M, P)
+        if primary.all():
+            return uy, uz, peak, w, ci
+        # amplitude of each cell's strongest source and its response in the other directions
+        first = np.flatnonzero(primary)[np.cumsum(primary) - 1]        # primary peak of each
+        amp = np.einsum("pm,mp->p", x, w) / m
+        sec = ~primary
+        cross = np.einsum("mp,mp->p", np.conj(w[:, first[sec]]), w[:, sec]) / m
+        resid = np.abs(amp[sec] - amp[first[sec]] * cross) ** 2
+        ok = np.ones(ci.size, dtype=bool)
+        ok[sec] = (resid >= floor[ci[sec]]) & (
+            resid >= np.abs(amp[first[sec]]) ** 2 * self._angle_dynamic)
+        uy, uz, peak, w, ci, x, rho = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok], x[ok],
+                                       rho[ok])
+        # Cells with candidates left: accept them strongest first, each tested on the vector
+        # less the least-squares fit of the sources accepted so far; then refine jointly.
+        keep = np.ones(ci.size, dtype=bool)
+        _, start, count = np.unique(ci, return_index=True, return_counts=True)
+        for c0, n0 in zip(start[count > 1], count[count > 1], strict=True):
+            xc = x[c0]
+            acc = [c0]
+            for p in range(c0 + 1, c0 + n0):
+                a = np.conj(w[:, acc])
+                res = xc - a @ np.linalg.lstsq(a, xc, rcond=None)[0]
+                rp = abs(np.dot(res, w[:, p]) / m) ** 2
+                if rp >= floor[ci[p]] and rp >= peak[c0] * self._angle_dynamic:
+                    acc.append(p)
+                else:
+                    keep[p] = False
+            idx = np.array(acc)
+            if idx.size < 2:
+                continue
+            for _ in range(2):
+                a = np.conj(w[:, idx])                                  # (M, n) source models
+                amps = np.linalg.lstsq(a, xc, rcond=None)[0]
+                for j, p in enumerate(idx):
+                    others = np.arange(idx.size) != j
+                    xp = xc - a[:, others] @ amps[others]
+                    # elevation afresh on what is left (two sources fool the sparse rows)
+                    uz_grid = self.detection_grid.el_sines
+                    cand = self._steer(np.full(uz_grid.size, uy[p]), uz_grid,
+                                       np.full(uz_grid.size, rho[p]))
+                    vis = uy[p] ** 2 + uz_grid**2 <= 1.0
+                    bz = np.where(vis, np.abs(xp @ cand), -1.0)
+                    uz[p] = uz_grid[int(np.argmax(bz))]
+                    if refine:
+                        y1, z1, _ = newton(xp[None, :], uy[p:p + 1], uz[p:p + 1], rho[p:p + 1])
+                        uy[p], uz[p] = y1[0], z1[0]
+                    w[:, p] = self._steer(uy[p:p + 1], uz[p:p + 1], rho[p:p + 1])[:, 0]
+            pw = np.abs(np.linalg.lstsq(np.conj(w[:, idx]), xc, rcond=None)[0]) ** 2
+            peak[idx] = pw
+            keep[idx] = (pw >= floor[ci[idx]]) & (pw >= pw.max() * self._angle_dynamic)
+        uy, uz, peak, w, ci = uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep]
+        return uy, uz, peak, w, ci
+
     def _beam_noise_factor(self, sig2: np.ndarray | None) -> float:
         """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""
         m = self.detection_grid.num_elements
@@ -728,8 +855,7 @@ class RadarProcessor:
         return float(used.sum() / (m * m * sig2.sum()))
 
     def _beam_neighbourhood(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
-                            alias: np.ndarray | None, uy: np.ndarray, uz: np.ndarray
-                            ) -> np.ndarray:
+                            alias: np.ndarray | None, steer: np.ndarray) -> np.ndarray:
         """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
         around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
 
@@ -742,7 +868,6 @@ class RadarProcessor:
         out = np.zeros((p, 3, 3))
         if p == 0:
             return out
-        steer = steering(self.detection_grid, uy, uz)                  # (M, P)
         m2 = float(self.detection_grid.num_elements) ** 2
         for i, j in enumerate((-1, 0, 1)):
             dn = (d + j) % nd
@@ -762,7 +887,7 @@ class RadarProcessor:
         return out
 
     def _guard(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray, alias: np.ndarray | None,
-               uy: np.ndarray, uz: np.ndarray, beam_excess: np.ndarray,
+               steer: np.ndarray, beam_excess: np.ndarray,
                cell_excess: np.ndarray, exp_d: np.ndarray, exp_r: np.ndarray,
                exp_pow: np.ndarray, exp_excess: np.ndarray, cell_pow: np.ndarray
                ) -> np.ndarray:
@@ -788,8 +913,7 @@ class RadarProcessor:
         if alias is not None:
             v = v * alias_phase(ntx, alias[pi])[:, None, :]
         el = combine_channels(v, self.calib.antenna.virtual, s.overlap)
-        steer = steering(self.detection_grid, uy[pi], uz[pi])
-        bj = np.abs(np.einsum("mp,mp->p", el, steer)) ** 2 / float(
+        bj = np.abs(np.einsum("mp,mp->p", el, steer[:, pi])) ** 2 / float(
             self.detection_grid.num_elements) ** 2
         explained = beam_excess[pi] < margin * leak * bj
         keep[pi[explained]] = False
@@ -829,6 +953,10 @@ class RadarProcessor:
                                          workers=self.settings.workers)
                 vis = np.where(self._visible[None], spec, 0.0)
                 sc = vis.reshape(kk, hyps.size, g.num_el * g.num_az).max(axis=2)
+                # Two sources in one cell can make a wrong hypothesis' beam peak a little
+                # higher than the right one's (a wrong one defocuses a lone source by
+                # several dB): the folded hypothesis keeps a small margin.
+                sc = np.where(hyps[None, :] == 0, sc, sc * self._alias_margin)
                 sc = np.where(allowed[ks], sc, -np.inf)
                 score[ks] = sc
                 spectra[ks] = spec.reshape(kk, hyps.size, g.num_el, g.num_az)[
