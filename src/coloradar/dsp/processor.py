@@ -164,8 +164,12 @@ class ProcessingSettings:
         strongest source, after that source's response is removed (model errors of real
         arrays: calibration residue, mutual coupling).
     near_field
-        Focus beams at the detection's range (:class:`~coloradar.dsp.angle.NearField`); the
-        cascade's aperture is in its near field over the whole processed range.
+        Focus beams at the detection's range (:class:`~coloradar.dsp.angle.NearField`): the
+        cascade's aperture is in its near field over the whole processed range. Off by
+        default: a calibration measured on a near reflector (the release's cascade file: a
+        reflector at ≈ 3.0 m, from its bins) already focuses every channel at that range,
+        and focusing again would add its phases twice (docs/dsp.md, "Near field"). On for
+        frames whose calibration carries no near-field phases (simulated frames).
     angle_refine
         Refine each direction off the grid by Newton steps on the Bartlett beam power
         (``angle_method="fft"``), after the log-parabola on the grid.
@@ -219,7 +223,7 @@ class ProcessingSettings:
     angle_pfa: float = 1e-3
     angle_refine: bool = True
     angle_dynamic_range_db: float = 20.0
-    near_field: bool = True
+    near_field: bool = False
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
