@@ -22,13 +22,21 @@ the difference co-array, so the spectrum costs two small FFTs, not one quadratic
 from __future__ import annotations
 
 import numpy as np
-
 import scipy.fft as sfft
 
 from .array import AngleGrid, beamform
 
-__all__ = ["NearField", "azimuth_peaks", "row_profile", "bartlett_spectrum", "capon_spectrum",
-           "covariance", "newton_refine", "refine_peak", "steering"]
+__all__ = [
+    "NearField",
+    "azimuth_peaks",
+    "bartlett_spectrum",
+    "capon_spectrum",
+    "covariance",
+    "newton_refine",
+    "refine_peak",
+    "row_profile",
+    "steering",
+]
 
 
 def bartlett_spectrum(grid: AngleGrid, vectors: np.ndarray, workers: int = 1) -> np.ndarray:

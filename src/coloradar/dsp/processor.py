@@ -31,11 +31,11 @@ from ..errors import FormatError, SettingsError
 from .angle import (
     NearField,
     azimuth_peaks,
-    row_profile,
     bartlett_spectrum,
     capon_spectrum,
     newton_refine,
     refine_peak,
+    row_profile,
     steering,
 )
 from .array import (
@@ -429,7 +429,7 @@ class RadarProcessor:
         self._angle_dynamic = 10.0 ** (-s.angle_dynamic_range_db / 10)
         self._alias_margin = 10.0 ** (-s.alias_margin_db / 10)
         self._visible_az = np.abs(dg.az_sines) <= 1.0
-        rows, counts = np.unique(dg.el_pos, return_counts=True)
+        _, counts = np.unique(dg.el_pos, return_counts=True)
         self._row_noise = float(dg.num_elements / counts.max())
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         self._near = NearField(tx - self._centre, rx - self._centre,

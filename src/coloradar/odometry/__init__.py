@@ -24,6 +24,7 @@ from .dead_reckoning import (
 from .ego_velocity import (
     EgoVelocity,
     EgoVelocityConfig,
+    VelocityPrior,
     estimate_ego_velocity,
     static_inlier_threshold,
 )
@@ -84,6 +85,7 @@ __all__ = [
     "RPEPairing",
     "RPEResult",
     "VelocityErrors",
+    "VelocityPrior",
     "absolute_trajectory_error",
     "apply_alignment",
     "associate_trajectories",
