@@ -212,7 +212,7 @@ class ProcessingSettings:
     cfar_rank: float = 0.75
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
-    doppler_unwrap: float = 5.0
+    doppler_unwrap: float = 10.0
     alias_margin_db: float = 1.5
     heatmap_unwrap: bool = False
     sidelobe_guard: bool = True
@@ -418,6 +418,15 @@ class RadarProcessor:
         self._env_d = sidelobe_envelope(window(s.doppler_window, nc), nd, nd // 2 + 1)
         self._env_r = sidelobe_envelope(window(s.range_window, ns), self.range_fft_size,
                                         self.num_range_bins)
+        # Channels whose coupling the file does not hold (the single chip's all-zero TX 2
+        # block): their leakage stays in the zero-Doppler bin at every range, so that bin's
+        # detection statistic leaves them out (scaled to the same noise mean).
+        self._uncoupled = None
+        cpl = self.calib.coupling
+        if s.coupling_subtraction and cpl is not None and cpl.missing_tx:
+            miss = np.zeros((ntx, nrx), dtype=bool)
+            miss[list(cpl.missing_tx)] = True
+            self._uncoupled = miss.ravel()
         # Where a point is: range and direction are measured from the virtual array's phase
         # centre; the Doppler shift within a chirp moves the beat frequency (f_c·v/S of range).
         self._centre = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
@@ -447,12 +456,14 @@ class RadarProcessor:
                               f"{adc.dtype} {adc.shape}")
         return adc
 
-    def _range_cube(self, adc: np.ndarray) -> np.ndarray:
+    def _range_cube(self, adc: np.ndarray, extra: bool = False) -> np.ndarray:
         """Calibrated range FFT ``(tx, rx, chirp, range)``; chirps carry the Doppler window and
-        the ``(−1)^c`` of the Doppler shift."""
+        the ``(−1)^c`` of the Doppler shift. ``extra``: one range bin more than
+        ``num_range_bins`` where the FFT has it (detection looks one bin beyond the last)."""
         x = self._check(adc)
+        keep = min(self.num_range_bins + int(extra), self.range_fft_size)
         if self._engine == "numba":
-            return self._range_cube_compiled(x)
+            return self._range_cube_compiled(x, keep)
         y = x - self._coupling if self._coupling is not None else x.astype(np.complex64)
         if y.dtype != np.complex64:
             y = y.astype(np.complex64)
@@ -461,9 +472,9 @@ class RadarProcessor:
         y *= self._mult
         out = sfft.fft(y, n=self.range_fft_size, axis=-1, workers=self.settings.workers,
                        overwrite_x=True)
-        return out[..., : self.num_range_bins]
+        return out[..., :keep]
 
-    def _range_cube_compiled(self, x: np.ndarray) -> np.ndarray:
+    def _range_cube_compiled(self, x: np.ndarray, keep: int) -> np.ndarray:
         """:meth:`_range_cube` with coupling, DC removal, calibration and windows in one
         compiled pass (same result to float32 rounding)."""
         from ._kernels import prepare_chirps
@@ -477,7 +488,7 @@ class RadarProcessor:
         prepare_chirps(x.view(np.float32), coupling, self._gain.view(np.float32),
                        self._chirp_weight, bool(self.settings.dc_removal), y.view(np.float32))
         out = sfft.fft(y, axis=-1, workers=self.settings.workers, overwrite_x=True)
-        return out[..., : self.num_range_bins]
+        return out[..., :keep]
 
     def _doppler(self, rcube: np.ndarray) -> np.ndarray:
         v = sfft.fft(rcube, n=self.doppler_fft_size, axis=2, workers=self.settings.workers)
@@ -593,8 +604,10 @@ class RadarProcessor:
         -------
         Detections
         """
-        rcube = self._range_cube(adc)
-        return self._detect(rcube, self._doppler(rcube))
+        rcube = self._range_cube(adc, extra=True)
+        nr = self.num_range_bins
+        return self._detect(rcube[..., :nr], self._doppler(rcube[..., :nr]),
+                            self._doppler(rcube[..., nr:]))
 
     def _detection_map(self, rd: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
@@ -613,7 +626,23 @@ class RadarProcessor:
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
                              int(np.ceil(s.min_range / self.range_bin_width)))
         wts = (sig2.mean() / sig2).astype(np.float32)
-        return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks, sig2
+        stat = (wts @ mag2).reshape(nd, nr).astype(np.float64)
+        if self._uncoupled is not None:
+            z = nd // 2
+            keep = ~self._uncoupled
+            row = wts[keep] @ mag2.reshape(ntx * nrx, nd, nr)[keep, z, :]
+            stat[z] = row * (wts.sum() / wts[keep].sum())
+        return stat, plain, self._looks, sig2
+
+    def _exclude_row(self, weighted: np.ndarray, nd: int) -> np.ndarray:
+        """Detection statistic ``(doppler,)`` of one range bin from weighted channel powers
+        ``(channels, doppler)``, the zero-Doppler bin without the channels of unknown
+        coupling (as :meth:`_detection_map`)."""
+        out = weighted.sum(axis=0).astype(np.float64)
+        if self._uncoupled is not None:
+            keep = ~self._uncoupled
+            out[nd // 2] = weighted[keep, nd // 2].sum() * (weighted.shape[0] / keep.sum())
+        return out
 
     def _cfar_mask(self, stat: np.ndarray, looks: int) -> tuple[np.ndarray, np.ndarray]:
         """CFAR on the detection statistic: bool mask and noise estimate, ``(doppler, range)``
@@ -634,9 +663,18 @@ class RadarProcessor:
         noise[:, r0:] = res.noise
         return mask, noise
 
-    def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
+    def _detect(self, rcube: np.ndarray, rd: np.ndarray, rd_next: np.ndarray | None = None
+                ) -> Detections:
+        """Detections of a range–Doppler cube; ``rd_next`` (tx, rx, doppler, 1 or 0): the range
+        bin after the last one, when computed (a return beyond the processed range then makes
+        no local maximum at the last bin)."""
         s = self.settings
         stat, plain, looks, sig2 = self._detection_map(rd)
+        nxt = None
+        if rd_next is not None and rd_next.shape[-1]:
+            m2 = np.square(np.abs(rd_next[..., 0])).reshape(-1, rd_next.shape[2])
+            wts = (np.ones(m2.shape[0]) if sig2 is None else sig2.mean() / sig2)
+            nxt = self._exclude_row(wts[:, None] * m2, rd_next.shape[2])
         mask, noise = self._cfar_mask(stat, looks)
         nd, nr = stat.shape
         if s.peak_grouping:
@@ -646,7 +684,7 @@ class RadarProcessor:
             along_d = (stat >= np.roll(stat, 1, axis=0)) & (stat >= np.roll(stat, -1, axis=0))
             up = np.empty_like(stat)
             up[:, :-1] = stat[:, 1:]
-            up[:, -1] = -np.inf
+            up[:, -1] = -np.inf if nxt is None else nxt
             down = np.empty_like(stat)
             down[:, 1:] = stat[:, :-1]
             down[:, 0] = -np.inf
@@ -705,14 +743,14 @@ class RadarProcessor:
         pd, pr = d[ci], r[ci]
         palias = alias[ci] if alias is not None else None
         # Beam of the 3×3 range–Doppler neighbourhood at each point's direction.
-        nb = self._beam_neighbourhood(rd, pd, pr, palias, steer)       # (P, 3, 3)
+        nb = self._beam_neighbourhood(rd, pd, pr, palias, steer, rd_next)  # (P, 3, 3)
         keep = np.ones(ci.size, dtype=bool)
         if s.peak_grouping and ci.size:
             # A point is a maximum of its own beam over its neighbours: a target one bin from
             # a stronger one in another direction stays, the skirt of one target goes.
             centre = nb[:, 1, 1]
             keep &= np.all(nb.reshape(-1, 9) <= centre[:, None] * (1 + 1e-6), axis=1)
-        if nr > 1 and ci.size:
+        if nr > 1 and ci.size and nxt is None:
             # A return beyond the last processed bin leaks into it with a slope no target
             # inside (within half a bin of it) can make.
             last = pr == nr - 1
@@ -859,7 +897,8 @@ class RadarProcessor:
         return float(used.sum() / (m * m * sig2.sum()))
 
     def _beam_neighbourhood(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
-                            alias: np.ndarray | None, steer: np.ndarray) -> np.ndarray:
+                            alias: np.ndarray | None, steer: np.ndarray,
+                            rd_next: np.ndarray | None = None) -> np.ndarray:
         """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
         around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
 
@@ -884,6 +923,9 @@ class RadarProcessor:
             for k, jr in enumerate((-1, 0, 1)):
                 rn = np.clip(r + jr, 0, nr - 1)
                 v = rd[:, :, dn, rn]
+                if jr == 1 and rd_next is not None and rd_next.shape[-1]:
+                    beyond = r + 1 >= nr
+                    v = np.where(beyond[None, None, :], rd_next[:, :, dn, 0], v)
                 if ph is not None:
                     v = v * ph[:, None, :]
                 el = combine_channels(v, self.calib.antenna.virtual, self.settings.overlap)
@@ -996,9 +1038,11 @@ class RadarProcessor:
         tuple
             ``(heatmap or None, pointcloud or None)`` as :meth:`heatmap` and :meth:`pointcloud`.
         """
-        rcube = self._range_cube(adc)
-        rd = self._doppler(rcube)
-        pts = self._detect(rcube, rd).pointcloud() if pointcloud else None
+        nr = self.num_range_bins
+        rcube = self._range_cube(adc, extra=pointcloud)
+        rd = self._doppler(rcube[..., :nr])
+        pts = (self._detect(rcube[..., :nr], rd, self._doppler(rcube[..., nr:])).pointcloud()
+               if pointcloud else None)
         if not heatmap:
             return None, pts
         return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
