@@ -257,3 +257,50 @@ def test_single_chip_coupling_leaves_no_points_on_noise_only_frames(radars):
     cells = w.num_chirps * (proc.num_range_bins - 2) * 6
     assert np.sum(ranges < 1.0) == 0, np.sort(ranges)
     assert ranges.size <= max(3, 3 * proc.settings.pfa * cells), ranges.size
+
+
+# --------------------------------------------------------------------------- ego-velocity
+def corridor(g: np.random.Generator, n: int = 70) -> np.ndarray:
+    """Static scatterers ahead: walls at y = ±1.5 m, floor and ceiling, and some in between."""
+    x = g.uniform(0.8, 7.0, n)
+    kind = g.integers(0, 4, n)
+    y = np.where(kind == 0, g.choice([-1.5, 1.5], n), g.uniform(-1.5, 1.5, n))
+    z = np.where(kind == 1, -0.8, np.where(kind == 2, 1.2, g.uniform(-0.8, 1.2, n)))
+    return np.c_[x, y, z]
+
+
+@pytest.mark.parametrize("name", ["cascade", "single_chip"])
+def test_ego_velocity_is_never_silently_wrong_up_to_10_m_s(radars, name):
+    """Frames of a static corridor (the simulator's forward model) at 1-10 m/s: no estimate
+    with ok=True is off by more than 0.2 m/s; at walking speeds the estimate is ok; with a
+    velocity prior (0.3 m/s off) the fast frames are ok wherever the range rates allow."""
+    from coloradar.odometry import VelocityPrior, ego_velocity_config, estimate_ego_velocity
+    from coloradar.sim import synthesize_adc
+
+    calib = radars[name]
+    proc = RadarProcessor(calib, coupling_subtraction=False)
+    cfg = ego_velocity_config(calib)
+    g = np.random.default_rng(23)
+    wrong, slow_ok, slow = 0, 0, 0
+    for speed in (1.0, 2.5, 6.0, 8.0, 10.0):
+        for i in range(2):
+            pts = corridor(g)
+            heading = np.radians(g.uniform(-20, 20))
+            v = speed * np.array([np.cos(heading), np.sin(heading), 0.0])
+            adc = synthesize_adc(calib, pts, -np.broadcast_to(v, pts.shape),
+                                 40.0 * np.exp(2j * np.pi * g.random(len(pts))),
+                                 noise_std=SIGMA, rng=i, precision="single")
+            if calib.phase_frequency is not None:
+                adc = apply_channel_errors(adc, calib.phase_frequency)
+            cloud = proc.pointcloud(adc)
+            k = cfg.dims
+            for prior in (None, VelocityPrior(v + 0.3 / np.sqrt(3), 0.3)):
+                ev = estimate_ego_velocity(cloud, config=cfg, velocity_prior=prior)
+                err = np.linalg.norm((ev.velocity - v)[:k])
+                wrong += int(ev.ok and not err <= 0.2)
+                print(name, speed, prior is not None, ev.ok, round(float(err), 3), ev.reason[:60])
+            if speed <= 2.5:
+                slow += 1
+                slow_ok += int(estimate_ego_velocity(cloud, config=cfg).ok)
+    assert wrong == 0
+    assert slow_ok == slow

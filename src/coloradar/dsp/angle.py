@@ -244,27 +244,33 @@ def newton_refine(grid: AngleGrid, vectors: np.ndarray, uy: np.ndarray, uz: np.n
         ``(u_y, u_z, power)`` float64 ``(K,)``; power in the units of
         :func:`bartlett_spectrum`.
     """
-    x = np.asarray(vectors, dtype=np.complex128)
+    x = np.asarray(vectors, dtype=np.complex64)
     m = grid.num_elements
-    a = np.pi * grid.rho * grid.azimuth_sign * grid.az_pos.astype(np.float64)
-    b = np.pi * grid.rho * grid.elevation_sign * grid.el_pos.astype(np.float64)
+    a = (np.pi * grid.rho * grid.azimuth_sign * grid.az_pos).astype(np.float32)
+    b = (np.pi * grid.rho * grid.elevation_sign * grid.el_pos).astype(np.float32)
     uy = np.asarray(uy, dtype=np.float64).copy()
     uz = np.asarray(uz, dtype=np.float64).copy()
 
     def beam(uy_: np.ndarray, uz_: np.ndarray):
-        e = np.exp(1j * (a[None, :] * uy_[:, None] + b[None, :] * uz_[:, None]))
-        z = x * e
-        return z
+        ph = (a[None, :] * uy_[:, None].astype(np.float32)
+              + b[None, :] * uz_[:, None].astype(np.float32))
+        e = np.empty(ph.shape, dtype=np.complex64)
+        e.real = np.cos(ph)
+        e.imag = np.sin(ph)
+        return x * e
 
     def power(uy_: np.ndarray, uz_: np.ndarray) -> np.ndarray:
         return np.abs(beam(uy_, uz_).sum(axis=1)) ** 2
 
-    p0 = power(uy, uz)
+    ca, cb_ = a.astype(np.complex64), b.astype(np.complex64)
+    caa, cbb, cab = ca * ca, cb_ * cb_, ca * cb_
+    p0 = power(uy, uz).astype(np.float64)
     for _ in range(iterations):
         z = beam(uy, uz)
         bv = z.sum(axis=1)
-        by, bz = 1j * (z @ a), 1j * (z @ b)
-        byy, bzz, byz = -(z @ (a * a)), -(z @ (b * b)), -(z @ (a * b))
+        # (complex @ complex: numpy has no BLAS path for complex @ real)
+        by, bz = 1j * (z @ ca), 1j * (z @ cb_)
+        byy, bzz, byz = -(z @ caa), -(z @ cbb), -(z @ cab)
         cb = np.conj(bv)
         gy = 2 * np.real(cb * by)
         gz = 2 * np.real(cb * bz)

@@ -62,6 +62,9 @@ from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
 
+MAX_SOURCES = 4
+"""Most angle peaks examined per range–Doppler cell (strongest first)."""
+
 __all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AngleMethod", "CouplingDomain",
            "NoiseWeighting", "ProcessingSettings", "RadarProcessor"]
 
@@ -438,6 +441,10 @@ class RadarProcessor:
         self._angle_dynamic = 10.0 ** (-s.angle_dynamic_range_db / 10)
         self._alias_margin = 10.0 ** (-s.alias_margin_db / 10)
         self._visible_az = np.abs(dg.az_sines) <= 1.0
+        rows_el, row_idx = np.unique(dg.el_pos, return_inverse=True)
+        self._row_of = np.eye(rows_el.size, dtype=np.complex64)[row_idx]         # (M, rows)
+        self._row_steer = np.exp(1j * np.pi * dg.rho * dg.elevation_sign * rows_el[:, None]
+                                 * self.grid.el_sines[None, :]).astype(np.complex64)
         _, counts = np.unique(dg.el_pos, return_counts=True)
         self._row_noise = float(dg.num_elements / counts.max())
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
@@ -845,46 +852,73 @@ class RadarProcessor:
             resid >= np.abs(amp[first[sec]]) ** 2 * self._angle_dynamic)
         uy, uz, peak, w, ci, x, rho = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok], x[ok],
                                        rho[ok])
-        # Cells with candidates left: accept them strongest first, each tested on the vector
-        # less the least-squares fit of the sources accepted so far; then refine jointly.
-        keep = np.ones(ci.size, dtype=bool)
-        _, start, count = np.unique(ci, return_index=True, return_counts=True)
-        for c0, n0 in zip(start[count > 1], count[count > 1], strict=True):
-            xc = x[c0]
-            acc = [c0]
-            for p in range(c0 + 1, c0 + n0):
-                a = np.conj(w[:, acc])
-                res = xc - a @ np.linalg.lstsq(a, xc, rcond=None)[0]
-                rp = abs(np.dot(res, w[:, p]) / m) ** 2
-                if rp >= floor[ci[p]] and rp >= peak[c0] * self._angle_dynamic:
-                    acc.append(p)
-                else:
-                    keep[p] = False
-            idx = np.array(acc)
-            if idx.size < 2:
-                continue
-            for _ in range(2):
-                a = np.conj(w[:, idx])                                  # (M, n) source models
-                amps = np.linalg.lstsq(a, xc, rcond=None)[0]
-                for j, p in enumerate(idx):
-                    others = np.arange(idx.size) != j
-                    xp = xc - a[:, others] @ amps[others]
-                    # elevation afresh on what is left (two sources fool the sparse rows)
-                    uz_grid = self.detection_grid.el_sines
-                    cand = self._steer(np.full(uz_grid.size, uy[p]), uz_grid,
-                                       np.full(uz_grid.size, rho[p]))
-                    vis = uy[p] ** 2 + uz_grid**2 <= 1.0
-                    bz = np.where(vis, np.abs(xp @ cand), -1.0)
-                    uz[p] = uz_grid[int(np.argmax(bz))]
-                    if refine:
-                        y1, z1, _ = newton(xp[None, :], uy[p:p + 1], uz[p:p + 1], rho[p:p + 1])
-                        uy[p], uz[p] = y1[0], z1[0]
-                    w[:, p] = self._steer(uy[p:p + 1], uz[p:p + 1], rho[p:p + 1])[:, 0]
-            pw = np.abs(np.linalg.lstsq(np.conj(w[:, idx]), xc, rcond=None)[0]) ** 2
-            peak[idx] = pw
-            keep[idx] = (pw >= floor[ci[idx]]) & (pw >= pw.max() * self._angle_dynamic)
-        uy, uz, peak, w, ci = uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep]
+        # Joint least-squares amplitudes of each cell's remaining sources (sidelobes of a
+        # second source get little of it), then each source refined on its cell's vector
+        # less the others' fit; all batched over cells (at most MAX_SOURCES per cell).
+        _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+        if count.max() < 2:
+            return uy, uz, peak, w, ci
+        rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
+        keep = rank < MAX_SOURCES
+        uy, uz, peak, w, ci, x, rho, rank, cell_of = (
+            uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep], x[keep], rho[keep],
+            rank[keep], cell_of[keep])
+        for it in range(2):
+            amps = self._joint_amplitudes(x, w, cell_of, rank)
+            pw = np.abs(amps) ** 2
+            top = np.zeros(cell_of.max() + 1)
+            np.maximum.at(top, cell_of, pw)
+            ok = (pw >= floor[ci]) & (pw >= top[cell_of] * self._angle_dynamic)
+            ok[rank == 0] = True
+            uy, uz, peak, w, ci, x, rho, amps = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok],
+                                                 x[ok], rho[ok], amps[ok])
+            _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+            rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
+            multi = count[cell_of] > 1
+            if not multi.any():
+                break
+            amps = self._joint_amplitudes(x, w, cell_of, rank)
+            model = np.conj(w) * amps[None, :]                          # (M, P) fitted sources
+            total = np.zeros((cell_of.max() + 1, w.shape[0]), dtype=np.complex128)
+            np.add.at(total, cell_of, model.T)
+            xp = (x - total[cell_of] + model.T)[multi]                  # vector less the others
+            j = np.flatnonzero(multi)
+            # elevation afresh on what is left (two sources fool the sparse rows)
+            # (azimuth-steered sums per elevation row, then the rows' elevation phases)
+            uz_grid = self.grid.el_sines
+            wa = self._steer(uy[j], np.zeros(j.size), rho[j])           # (M, J)
+            rows = (xp * wa.T) @ self._row_of                            # (J, rows)
+            bz = np.abs(rows @ self._row_steer)                          # (J, n_el)
+            vis = uy[j, None] ** 2 + uz_grid[None, :] ** 2 <= 1.0
+            uz[j] = uz_grid[np.argmax(np.where(vis, bz, -1.0), axis=1)]
+            if refine:
+                uy[j], uz[j], _ = newton(xp, uy[j], uz[j], rho[j])
+            w[:, j] = self._steer(uy[j], uz[j], rho[j])
+        amps = self._joint_amplitudes(x, w, cell_of, rank)
+        multi = count[cell_of] > 1
+        peak[multi] = np.abs(amps[multi]) ** 2
         return uy, uz, peak, w, ci
+
+    @staticmethod
+    def _joint_amplitudes(x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
+                          rank: np.ndarray) -> np.ndarray:
+        """Least-squares amplitudes of every cell's sources, batched: the sources of a cell
+        are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak."""
+        ncell = int(cell_of.max()) + 1
+        nmax = int(rank.max()) + 1
+        m = w.shape[0]
+        a = np.zeros((ncell, m, nmax), dtype=np.complex128)
+        a[cell_of, :, rank] = np.conj(w.T)
+        xc = np.zeros((ncell, m), dtype=np.complex128)
+        xc[cell_of] = x
+        gram = np.conj(a.transpose(0, 2, 1)) @ a                       # (C, n, n)
+        used = np.zeros((ncell, nmax), dtype=bool)
+        used[cell_of, rank] = True
+        idx = np.arange(nmax)
+        gram[:, idx, idx] += np.where(used, 0.0, 1.0)                   # padded columns
+        rhs = np.einsum("cmn,cm->cn", np.conj(a), xc)
+        sol = np.linalg.solve(gram, rhs[..., None])[..., 0]
+        return sol[cell_of, rank]
 
     def _beam_noise_factor(self, sig2: np.ndarray | None) -> float:
         """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""

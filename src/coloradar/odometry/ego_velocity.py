@@ -102,6 +102,10 @@ class EgoVelocityConfig:
         Largest sensor speed [m/s] searched when range rates may be aliased
         (``max_velocity`` given): minimal sets are also solved for the alias shifts of their
         range rates up to it.
+    min_inlier_fraction
+        The estimate is not ok when its inliers are fewer than this fraction of the usable
+        points: no motion explains the cloud (at high speed, direction errors of a coarse
+        array move range rates beyond the threshold, and a few chance inliers decide).
     ambiguity_distance, ambiguity_ratio
         With ``max_velocity`` given, the estimate is not ok when another velocity more than
         ``ambiguity_distance`` [m/s] away has at least ``ambiguity_ratio`` of its weighted
@@ -122,7 +126,8 @@ class EgoVelocityConfig:
     planar: bool = False
     max_speed: float = 10.0
     ambiguity_distance: float = 0.2
-    ambiguity_ratio: float = 0.8
+    ambiguity_ratio: float = 0.6
+    min_inlier_fraction: float = 0.3
 
     def __post_init__(self) -> None:
         if not self.threshold > 0:
@@ -284,13 +289,18 @@ def _hypotheses(d: np.ndarray, vr: np.ndarray, rng: np.random.Generator, count: 
     by multiples of the period that ``max_speed`` allows (a range rate of a static point is
     at most the speed), and solutions faster than ``max_speed`` are dropped.
     """
+    n = 0
+    if period is not None and np.isfinite(max_speed):
+        n = int(np.ceil((max_speed + period / 2) / period))
+        # every set brings up to (2n+1)^k hypotheses: fewer sets keep the total bounded
+        # (32 sets still hold an all-static one with probability > 98 % at half outliers)
+        count = max(32, min(count, 8 * count // (2 * n + 1) ** k))
     idx = _draw_sets(rng, d.shape[0], count, k)
     m = -d[idx][:, :, :k]                                          # (H, k, k)
     # |det| of k unit vectors is the volume they span; tiny ones are (near-)degenerate.
     good = np.abs(np.linalg.det(m)) > 1e-6
     m, rates = m[good], vr[idx[good]]                              # (G, k, k), (G, k)
-    if period is not None and np.isfinite(max_speed):
-        n = int(np.ceil((max_speed + period / 2) / period))
+    if n:
         grid = np.stack(np.meshgrid(*[np.arange(-n, n + 1)] * k, indexing="ij"), -1).reshape(-1, k)
         shifted = rates[:, None, :] + period * grid[None]          # (G, S, k)
         # the true range rate of a static point lies within ±max_speed
@@ -500,6 +510,9 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
     if spread < cfg.min_spread:
         ok, reason = False, (f"degenerate geometry: the {n} inlier directions leave one velocity "
                              f"component unobserved (spread {spread:.3g} < {cfg.min_spread:g})")
+    elif n < cfg.min_inlier_fraction * n_valid:
+        ok, reason = False, (f"only {n} of {n_valid} points fit the chosen motion (fewer than "
+                             f"{cfg.min_inlier_fraction:g} of them)")
     elif prior is not None and np.any(np.abs(v - prior.velocity)[:k]
                                       > prior.radius(cfg.threshold)[:k]):
         ok, reason = False, (f"the estimate {np.round(v, 2).tolist()} m/s lies outside the "
