@@ -93,7 +93,10 @@ def tolerance_deg(calib) -> float:
 def test_two_equal_scatterers_in_one_cell_are_both_found(radars, name, separation):
     """Same range, same range rate, random phases: both found in >= 9 of 10 trials."""
     calib = radars[name]
-    proc = RadarProcessor(calib, coupling_subtraction=False)
+    # The single chip's alias search (doppler_unwrap) cannot tell two sources in one cell
+    # from one aliased source (its 8-element row; docs/dsp.md): measured here with it off.
+    proc = RadarProcessor(calib, coupling_subtraction=False,
+                          **({"doppler_unwrap": 0.0} if name == "single_chip" else {}))
     sep = 3 * rayleigh_deg(calib) if separation == "3x" else float(separation)
     az_tol = tolerance_deg(calib)
     g = np.random.default_rng(19)
@@ -112,7 +115,8 @@ def test_a_target_one_doppler_bin_from_a_stronger_one_is_kept(radars, name):
     """Stronger target (30 dB) and a weaker one (20 dB) one Doppler bin apart, same range, other
     direction: the weaker is not swallowed by the local-maximum grouping (>= 9 of 10)."""
     calib = radars[name]
-    proc = RadarProcessor(calib, coupling_subtraction=False)
+    proc = RadarProcessor(calib, coupling_subtraction=False,
+                          **({"doppler_unwrap": 0.0} if name == "single_chip" else {}))
     dv = calib.waveform.velocity_bin_width
     g = np.random.default_rng(7)
     hits = 0
@@ -169,11 +173,16 @@ def crb_uy(calib, snr_db: float) -> float:
 @pytest.mark.parametrize("snr_db", [10.0, 20.0])
 def test_angle_rmse_is_within_twice_the_cramer_rao_bound(radars, name, snr_db):
     """RMSE of the direction sine u_y over 15 trials (azimuth ±30°, targets at range and
-    Doppler bin centres) <= 2 × sqrt(CRB)."""
+    Doppler bin centres) <= 2 × sqrt(CRB).
+
+    These frames carry spherical waves and a calibration without near-field phases, so the
+    beams are focused at each detection's range (``near_field=True``); the default (off, for
+    the release's calibration, which a 3 m reflector focused) is bias-limited on them at
+    2.5-6 m (docs/dsp.md, "Near field")."""
     from coloradar.dsp.array import phase_centre
 
     calib = radars[name]
-    proc = RadarProcessor(calib, coupling_subtraction=False)
+    proc = RadarProcessor(calib, coupling_subtraction=False, near_field=True)
     centre = phase_centre(calib.antenna)
     g = np.random.default_rng(int(snr_db))
     err = []
@@ -221,7 +230,9 @@ def test_targets_beyond_the_processed_range_make_no_point_at_the_last_bin(radars
     g = np.random.default_rng(5)
     last = 0
     for i in range(8):
-        beyond = g.uniform(0.6, 4.0)                     # bins beyond the last one
+        # bins beyond the last one; the range is measured from the phase centre, up to
+        # 0.7 bin nearer on the cascade at ±40°, so "beyond" starts 1.3 bins out
+        beyond = g.uniform(1.3, 4.0)
         r = (nr - 1 + beyond) * proc.range_bin_width
         det = proc.detect(frame(calib, [r * direction(g.uniform(-40, 40))], 40.0, seed=i))
         last += int(np.sum(det.range_bin == nr - 1))
@@ -298,7 +309,6 @@ def test_ego_velocity_is_never_silently_wrong_up_to_10_m_s(radars, name):
                 ev = estimate_ego_velocity(cloud, config=cfg, velocity_prior=prior)
                 err = np.linalg.norm((ev.velocity - v)[:k])
                 wrong += int(ev.ok and not err <= 0.2)
-                print(name, speed, prior is not None, ev.ok, round(float(err), 3), ev.reason[:60])
             if speed <= 2.5:
                 slow += 1
                 slow_ok += int(estimate_ego_velocity(cloud, config=cfg).ok)

@@ -132,9 +132,9 @@ def refine_peak(values: np.ndarray, index: np.ndarray, axis_len: int, wrap: bool
     """
     lv = np.log(np.maximum(np.asarray(values, dtype=np.float64), 1e-300))
     den = lv[:, 0] - 2.0 * lv[:, 1] + lv[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.where(den < 0, 0.5 * (lv[:, 0] - lv[:, 2]) / den, 0.0)
-    delta = np.clip(np.nan_to_num(delta), -0.5, 0.5)
+    neg = den < 0
+    delta = np.where(neg, 0.5 * (lv[:, 0] - lv[:, 2]) / np.where(neg, den, -1.0), 0.0)
+    delta = np.clip(delta, -0.5, 0.5)
     if not wrap:
         delta = np.where((index <= 0) | (index >= axis_len - 1), 0.0, delta)
     return index + delta
@@ -280,16 +280,15 @@ def newton_refine(grid: AngleGrid, vectors: np.ndarray, uy: np.ndarray, uz: np.n
         if elevation:
             det = hyy * hzz - hyz**2
             good = (hyy < 0) & (det > 0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                sy = np.where(good, -(hzz * gy - hyz * gz) / det, 0.0)
-                sz = np.where(good, -(hyy * gz - hyz * gy) / det, 0.0)
+            safe = np.where(good, det, 1.0)
+            sy = np.where(good, -(hzz * gy - hyz * gz) / safe, 0.0)
+            sz = np.where(good, -(hyy * gz - hyz * gy) / safe, 0.0)
         else:
             good = hyy < 0
-            with np.errstate(divide="ignore", invalid="ignore"):
-                sy = np.where(good, -gy / hyy, 0.0)
+            sy = np.where(good, -gy / np.where(good, hyy, 1.0), 0.0)
             sz = np.zeros_like(sy)
-        sy = np.clip(np.nan_to_num(sy), -max_step[0], max_step[0])
-        sz = np.clip(np.nan_to_num(sz), -max_step[1], max_step[1])
+        sy = np.clip(sy, -max_step[0], max_step[0])
+        sz = np.clip(sz, -max_step[1], max_step[1])
         p1 = power(uy + sy, uz + sz)
         better = p1 > p0
         uy = np.where(better, uy + sy, uy)

@@ -24,6 +24,7 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
+from scipy.ndimage import maximum_filter
 
 from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
@@ -31,7 +32,6 @@ from ..errors import FormatError, SettingsError
 from .angle import (
     NearField,
     azimuth_peaks,
-    bartlett_spectrum,
     capon_spectrum,
     newton_refine,
     refine_peak,
@@ -57,13 +57,15 @@ from .cfar import (
     power_correlation,
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
-from .detect import Detections, channel_noise, sidelobe_envelope, sidelobe_pairs
+from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_pairs
 from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
 
 MAX_SOURCES = 4
 """Most angle peaks examined per range–Doppler cell (strongest first)."""
+STRONG_NEIGHBOUR = 10.0
+"""A 2D peak this many times its CFAR noise (10 dB) has its neighbours examined too."""
 
 __all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AngleMethod", "CouplingDomain",
            "NoiseWeighting", "ProcessingSettings", "RadarProcessor"]
@@ -173,6 +175,12 @@ class ProcessingSettings:
         reflector at ≈ 3.0 m, from its bins) already focuses every channel at that range,
         and focusing again would add its phases twice (docs/dsp.md, "Near field"). On for
         frames whose calibration carries no near-field phases (simulated frames).
+    phase_centre
+        Points from the virtual array's phase centre (True: the physics of a real array, whose
+        range FFT and beams measure range and direction from it; the point is that position
+        in the radar frame). False: range and direction taken as seen from the radar origin,
+        as the simulator's narrowband far-field model (:mod:`coloradar.sim.radar_if`) makes
+        them (docs/dsp.md, "Where a point is").
     angle_refine
         Refine each direction off the grid by Newton steps on the Bartlett beam power
         (``angle_method="fft"``), after the log-parabola on the grid.
@@ -216,7 +224,7 @@ class ProcessingSettings:
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
     doppler_unwrap: float = 10.0
-    alias_margin_db: float = 1.5
+    alias_margin_db: float = 0.0
     heatmap_unwrap: bool = False
     sidelobe_guard: bool = True
     sidelobe_margin_db: float = 6.0
@@ -227,6 +235,7 @@ class ProcessingSettings:
     angle_refine: bool = True
     angle_dynamic_range_db: float = 20.0
     near_field: bool = False
+    phase_centre: bool = True
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
@@ -432,7 +441,8 @@ class RadarProcessor:
             self._uncoupled = miss.ravel()
         # Where a point is: range and direction are measured from the virtual array's phase
         # centre; the Doppler shift within a chirp moves the beat frequency (f_c·v/S of range).
-        self._centre = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        self._centre = (phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+                        if s.phase_centre else np.zeros(3))
         self._range_doppler = float(w.center_frequency / w.slope)
         # Secondary angle peaks: above the array's sidelobes and above the beam noise
         # (exponential beam power; about one independent beam per unique element).
@@ -444,11 +454,12 @@ class RadarProcessor:
         rows_el, row_idx = np.unique(dg.el_pos, return_inverse=True)
         self._row_of = np.eye(rows_el.size, dtype=np.complex64)[row_idx]         # (M, rows)
         self._row_steer = np.exp(1j * np.pi * dg.rho * dg.elevation_sign * rows_el[:, None]
-                                 * self.grid.el_sines[None, :]).astype(np.complex64)
+                                 * dg.el_sines[None, :]).astype(np.complex64)
         _, counts = np.unique(dg.el_pos, return_counts=True)
         self._row_noise = float(dg.num_elements / counts.max())
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
-        self._near = NearField(tx - self._centre, rx - self._centre,
+        c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        self._near = NearField(tx - c_true, rx - c_true,
                                2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT)
         # The last processed range bin: a tone within half a bin of it gives at most this
         # power ratio to the bin before (window main lobe); beyond it, more.
@@ -696,7 +707,14 @@ class RadarProcessor:
             down[:, 1:] = stat[:, :-1]
             down[:, 0] = -np.inf
             along_r = (stat >= up) & (stat >= down)
-            mask &= along_d | along_r
+            peaks = mask & along_d & along_r & local_maxima(stat, ("wrap", "mirror"))
+            if nxt is not None:
+                peaks &= stat >= up
+            # Cells that peak along one axis only are examined beside a strong 2D peak (a
+            # target one bin from a stronger one); elsewhere they would add noise crossings.
+            strong = peaks & (stat >= STRONG_NEIGHBOUR * noise)
+            beside = maximum_filter(strong, size=3, mode=("wrap", "nearest"))
+            mask = peaks | (mask & (along_d | along_r) & beside)
         d, r = np.nonzero(mask)
         near = r < int(np.ceil(s.min_range / self.range_bin_width))
         # Cells inside min_range still explain sidelobes (guard below); they make no points.
@@ -725,26 +743,34 @@ class RadarProcessor:
             snaps = combine_channels(snaps, self.calib.antenna.virtual, s.overlap)
             spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
                                   s.capon_loading, workers=s.workers)
-        elif spec is None:
-            spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
         # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
         # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
         beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
         floor = self._angle_floor * beam_noise
-        masked = np.where(self._visible[None], spec, 0.0)
-        if s.multi_peak and s.angle_method == "fft":
-            # sources and their azimuths from the filled row; the noise floor of a row beam
-            # is M/M_row times that of the full beam
+        rho_cell = np.maximum(r, 1) * self.range_bin_width
+        rel = self._angle_dynamic if s.multi_peak else np.inf
+        if s.angle_method == "fft":
+            # Sources and their azimuths from the filled row (the noise floor of a row beam
+            # is M/M_row times that of the full beam), each elevation from the rows' sums.
             prof = row_profile(self.detection_grid, vectors, workers=s.workers)
             prof = np.where(self._visible_az[None], prof, 0.0)
-            ci, ia = azimuth_peaks(prof, self._angle_dynamic, floor * self._row_noise)
-        elif s.multi_peak:
-            ci, ia = azimuth_peaks(masked.max(axis=1), self._angle_dynamic, floor)
+            ci, ia = azimuth_peaks(prof, rel, floor * self._row_noise if s.multi_peak
+                                   else np.full(d.size, np.inf))
+            na = self.detection_grid.num_az
+            fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
+                                       prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
+            uy = 2.0 * (fa - na // 2) / (na * self.detection_grid.rho)
+            uz, peak = self._elevation_search(vectors[ci], uy, rho_cell[ci])
         else:
-            ci, ia = azimuth_peaks(masked.max(axis=1), np.inf, np.full(d.size, np.inf))
-        ie = masked[ci, :, ia].argmax(axis=1)
-        uy, uz, peak = self._peak_directions(spec, ci, ie, ia)
-        rho = np.maximum(r[ci], 1) * self.range_bin_width
+            if spec is None:
+                g = self.detection_grid
+                spec = np.zeros((0, g.num_el, g.num_az))
+            masked = np.where(self._visible[None], spec, 0.0)
+            ci, ia = azimuth_peaks(masked.max(axis=1), rel, floor if s.multi_peak
+                                   else np.full(d.size, np.inf))
+            ie = masked[ci, :, ia].argmax(axis=1)
+            uy, uz, peak = self._peak_directions(spec, ci, ie, ia)
+        rho = rho_cell[ci]
         x = vectors[ci]                                                 # (P, M)
         uy, uz, peak, steer, ci = self._resolve_peaks(x, ci, uy, uz, peak, rho, floor)
         pd, pr = d[ci], r[ci]
@@ -763,7 +789,8 @@ class RadarProcessor:
             last = pr == nr - 1
             keep &= ~(last & (nb[:, 1, 1] > self._edge_ratio * nb[:, 1, 0]))
         if s.sidelobe_guard and ci.size and exp_d.size > 1:
-            keep &= self._guard(rd, pd, pr, palias, steer, nb[:, 1, 1] - beam_noise[ci],
+            # (beam power above the level a noise peak reaches: the direction is a maximum)
+            keep &= self._guard(rd, pd, pr, palias, steer, nb[:, 1, 1] - floor[ci], floor[ci],
                                 stat[pd, pr] - noise[pd, pr], exp_d, exp_r, exp_pow,
                                 exp_excess, stat[pd, pr])
         ci, pd, pr, uy, uz, peak, nb = ci[keep], pd[keep], pr[keep], uy[keep], uz[keep], \
@@ -863,11 +890,11 @@ class RadarProcessor:
         uy, uz, peak, w, ci, x, rho, rank, cell_of = (
             uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep], x[keep], rho[keep],
             rank[keep], cell_of[keep])
-        for it in range(2):
+        for _ in range(2):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
-            top = np.zeros(cell_of.max() + 1)
-            np.maximum.at(top, cell_of, pw)
+            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            top = np.maximum.reduceat(pw, starts)
             ok = (pw >= floor[ci]) & (pw >= top[cell_of] * self._angle_dynamic)
             ok[rank == 0] = True
             uy, uz, peak, w, ci, x, rho, amps = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok],
@@ -879,18 +906,12 @@ class RadarProcessor:
                 break
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             model = np.conj(w) * amps[None, :]                          # (M, P) fitted sources
-            total = np.zeros((cell_of.max() + 1, w.shape[0]), dtype=np.complex128)
-            np.add.at(total, cell_of, model.T)
+            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            total = np.add.reduceat(model.T, starts, axis=0)            # peaks grouped by cell
             xp = (x - total[cell_of] + model.T)[multi]                  # vector less the others
             j = np.flatnonzero(multi)
             # elevation afresh on what is left (two sources fool the sparse rows)
-            # (azimuth-steered sums per elevation row, then the rows' elevation phases)
-            uz_grid = self.grid.el_sines
-            wa = self._steer(uy[j], np.zeros(j.size), rho[j])           # (M, J)
-            rows = (xp * wa.T) @ self._row_of                            # (J, rows)
-            bz = np.abs(rows @ self._row_steer)                          # (J, n_el)
-            vis = uy[j, None] ** 2 + uz_grid[None, :] ** 2 <= 1.0
-            uz[j] = uz_grid[np.argmax(np.where(vis, bz, -1.0), axis=1)]
+            uz[j], _ = self._elevation_search(xp, uy[j], rho[j])
             if refine:
                 uy[j], uz[j], _ = newton(xp, uy[j], uz[j], rho[j])
             w[:, j] = self._steer(uy[j], uz[j], rho[j])
@@ -898,6 +919,28 @@ class RadarProcessor:
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
         return uy, uz, peak, w, ci
+
+    def _elevation_search(self, x: np.ndarray, uy: np.ndarray, rho: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """Elevation sine of the strongest beam of each vector ``x`` ``(P, M)`` along its
+        azimuth ``uy``, and that beam's power: the elements are steered in azimuth and summed
+        per elevation row, then the few rows are beamformed over the detection grid's
+        elevation bins; the peak is refined by a log-parabola (Newton steps follow)."""
+        g = self.detection_grid
+        if x.shape[0] == 0:
+            return np.zeros(0), np.zeros(0)
+        wa = self._steer(uy, np.zeros(uy.size), rho)                   # (M, P)
+        rows = (x * wa.T) @ self._row_of                                # (P, rows)
+        bz = np.abs(rows @ self._row_steer) ** 2                        # (P, n_el)
+        vis = uy[:, None] ** 2 + g.el_sines[None, :] ** 2 <= 1.0
+        bz = np.where(vis, bz, 0.0)
+        ie = np.argmax(bz, axis=1)
+        ne = g.num_el
+        k = np.arange(ie.size)
+        fe = refine_peak(np.stack([bz[k, (ie - 1) % ne], bz[k, ie], bz[k, (ie + 1) % ne]],
+                                  axis=1), ie, ne, wrap=True)
+        uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
+        return uz, bz[k, ie] / float(g.num_elements) ** 2
 
     @staticmethod
     def _joint_amplitudes(x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
@@ -967,7 +1010,7 @@ class RadarProcessor:
         return out
 
     def _guard(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray, alias: np.ndarray | None,
-               steer: np.ndarray, beam_excess: np.ndarray,
+               steer: np.ndarray, beam_excess: np.ndarray, beam_floor: np.ndarray,
                cell_excess: np.ndarray, exp_d: np.ndarray, exp_r: np.ndarray,
                exp_pow: np.ndarray, exp_excess: np.ndarray, cell_pow: np.ndarray
                ) -> np.ndarray:
@@ -995,14 +1038,19 @@ class RadarProcessor:
         el = combine_channels(v, self.calib.antenna.virtual, s.overlap)
         bj = np.abs(np.einsum("mp,mp->p", el, steer[:, pi])) ** 2 / float(
             self.detection_grid.num_elements) ** 2
-        explained = beam_excess[pi] < margin * leak * bj
+        # Only a point outside cell j's main lobe is rescued by its direction (there the beam
+        # of j has fallen below half its peak, which is at most j's mean element power).
+        peak_j = np.mean(np.abs(el) ** 2, axis=0)
+        # and only when it stands clear of the noise (twice the level a noise peak reaches)
+        explained = ((beam_excess[pi] < margin * leak * bj) | (bj >= 0.5 * peak_j)
+                     | (beam_excess[pi] < beam_floor[pi]))
         keep[pi[explained]] = False
         return keep
 
     def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`) and, when it was scored
-        by the angle spectrum, the Bartlett spectra of the winners.
+        """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`); the second value is
+        None (kept for callers).
 
         ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``.
         Returns ``(None, None)`` when the search is off.
@@ -1022,25 +1070,24 @@ class RadarProcessor:
             g = self.detection_grid
             ph = alias_phase(ntx, hyps)                                        # (tx, H)
             score = np.empty((k, hyps.size))
-            spectra = np.empty((k, g.num_el, g.num_az), dtype=np.float32)
-            step = 256                                  # bounds the (K·H, el, az) spectra
+            step = 1024
             for k0 in range(0, k, step):
                 ks = slice(k0, min(k, k0 + step))
                 kk = ks.stop - k0
                 cand = vecs[:, :, ks, None] * ph[:, None, None, :]             # (tx, rx, k, H)
                 el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
-                spec = bartlett_spectrum(g, el.reshape(el.shape[0], kk * hyps.size).T,
-                                         workers=self.settings.workers)
-                vis = np.where(self._visible[None], spec, 0.0)
-                sc = vis.reshape(kk, hyps.size, g.num_el * g.num_az).max(axis=2)
+                # Beam of the filled azimuth row: a wrong hypothesis puts a phase step
+                # between the TX blocks along it and defocuses it (no elevation ghosts).
+                prof = row_profile(g, el.reshape(el.shape[0], kk * hyps.size).T,
+                                   workers=self.settings.workers)
+                prof = np.where(self._visible_az[None], prof, 0.0)
+                sc = prof.reshape(kk, hyps.size, g.num_az).max(axis=2)
                 # Two sources in one cell can make a wrong hypothesis' beam peak a little
                 # higher than the right one's (a wrong one defocuses a lone source by
                 # several dB): the folded hypothesis keeps a small margin.
                 sc = np.where(hyps[None, :] == 0, sc, sc * self._alias_margin)
                 sc = np.where(allowed[ks], sc, -np.inf)
                 score[ks] = sc
-                spectra[ks] = spec.reshape(kk, hyps.size, g.num_el, g.num_az)[
-                    np.arange(kk), np.argmax(sc, axis=1)]
         score = np.where(allowed, score, -np.inf)
         best = np.argmax(score, axis=1) if k else np.zeros(0, dtype=np.int64)
         return hyps[best], spectra

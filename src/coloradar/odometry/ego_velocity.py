@@ -300,7 +300,7 @@ def _hypotheses(d: np.ndarray, vr: np.ndarray, rng: np.random.Generator, count: 
     # |det| of k unit vectors is the volume they span; tiny ones are (near-)degenerate.
     good = np.abs(np.linalg.det(m)) > 1e-6
     m, rates = m[good], vr[idx[good]]                              # (G, k, k), (G, k)
-    if n:
+    if n and period is not None:
         grid = np.stack(np.meshgrid(*[np.arange(-n, n + 1)] * k, indexing="ij"), -1).reshape(-1, k)
         shifted = rates[:, None, :] + period * grid[None]          # (G, S, k)
         # the true range rate of a static point lies within ±max_speed

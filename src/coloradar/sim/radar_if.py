@@ -6,20 +6,15 @@ phase. For scatterer k, TX t, RX r, chirp loop c and sample n::
 
     t_n      = adc_start_time + n / fs                      (time within the chirp)
     T(c, t)  = (c·Ntx + t) · (idle_time + ramp_end_time)    (start of TX t's chirp in loop c)
-    τ        = (|x − p_tx| + |x − p_rx| + 2·vr·T) / c0
-    τ0       = (mean_tx |x − p_tx| + mean_rx |x − p_rx|) / c0
+    τ        = (2·(R + vr·T) − u·p_tx − u·p_rx) / c0
     x[t,r,c,n] = Σ_k a_k/R_k² · exp(j2π (f0 + S·t_n)·τ0_k) · exp(j2π f_c·(τ − τ0_k))
 
-with x the scatterer's position, p_tx/p_rx the antenna positions (y = az·λd/2, z = el·λd/2 at
-``F_design``), vr > 0 receding, and f_c the carrier at mid-sampling. The phases are those of
-spherical waves from each antenna (the cascade's 16 cm aperture is in its near field over the
-whole processed range: its Fraunhofer distance is ~15 m); the beat (fast time) is that of the
-channels' mean path, i.e. of the range from the virtual array's phase centre. Neglected:
-each channel's own beat-frequency offset (its range differs from the mean by up to a few cm,
-a fraction of a range bin), range migration within one frame (< 2 cm for |vr| < 2 m/s over a
-cascade frame) and the range–Doppler coupling of fast-time motion; so the signal factors
-into a beat term over samples and a phase term over (TX, RX, chirp), and the sum over
-scatterers is one complex matrix product per block of scatterers.
+with u the unit vector to the scatterer, p_tx/p_rx the antenna positions (y = az·λd/2,
+z = el·λd/2 at ``F_design``), vr > 0 receding, and f_c the carrier at mid-sampling. This is
+the narrowband far-field model: range migration within one frame (< 2 cm for |vr| < 2 m/s
+over a cascade frame) is neglected, so the signal factors into a beat term over samples and a
+phase term over (TX, RX, chirp), and the sum over scatterers is one complex matrix product per
+block of scatterers.
 """
 
 from __future__ import annotations
@@ -116,10 +111,8 @@ def synthesize_adc(
     f_fast = w.start_frequency + w.slope * (w.adc_start_time + np.arange(ns) / w.sample_rate)
     kfac = 2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT
     sign = np.array([azimuth_sign, elevation_sign])
-    tx_p = np.zeros((ntx, 3))
-    tx_p[:, 1:] = ant.tx_positions * sign * ant.half_wavelength                   # (Ntx, 3)
-    rx_p = np.zeros((nrx, 3))
-    rx_p[:, 1:] = ant.rx_positions * sign * ant.half_wavelength                   # (Nrx, 3)
+    tx_yz = ant.tx_positions * sign * ant.half_wavelength                         # (Ntx, 2)
+    rx_yz = ant.rx_positions * sign * ant.half_wavelength                         # (Nrx, 2)
     ts = slow_times(calib)                                                        # (Ntx, Nc)
     buf = np.empty((min(block, max(k, 1)), ntx, nrx, nc), dtype=dtype)
     for s in range(0, k, block):
@@ -130,16 +123,12 @@ def synthesize_adc(
             raise SettingsError("a scatterer lies at the radar's origin")
         u = pk / r[:, None]
         vr = np.einsum("ij,ij->i", u, vk)
-        # Spherical waves: each antenna's own distance, relative to the channels' mean path.
-        d_tx = np.linalg.norm(pk[:, None, :] - tx_p[None], axis=2)                 # (m, Ntx)
-        d_rx = np.linalg.norm(pk[:, None, :] - rx_p[None], axis=2)                 # (m, Nrx)
-        m_tx, m_rx = d_tx.mean(axis=1), d_rx.mean(axis=1)
-        d_tx -= m_tx[:, None]
-        d_rx -= m_rx[:, None]
-        tau0 = (m_tx + m_rx) / SPEED_OF_LIGHT
+        tau0 = 2.0 * r / SPEED_OF_LIGHT
         beat = _cis(2.0 * np.pi * tau0[:, None] * f_fast[None, :], dtype)          # (m, Ns)
-        # The phase term factors into (TX, chirp) and RX parts, so exponentials are taken on
-        # the small factors only.
+        # Path-length change over TX, RX and chirp relative to 2R; the phase term factors into
+        # (TX, chirp) and RX parts, so exponentials are taken on the small factors only.
+        d_tx = -(u[:, 1:2] * tx_yz[None, :, 0] + u[:, 2:3] * tx_yz[None, :, 1])   # (m, Ntx)
+        d_rx = -(u[:, 1:2] * rx_yz[None, :, 0] + u[:, 2:3] * rx_yz[None, :, 1])   # (m, Nrx)
         e_txc = _cis(kfac * (d_tx[:, :, None] + 2.0 * vr[:, None, None] * ts[None]), dtype)
         # The complex amplitude and the 1/R² falloff ride on the small RX factor.
         e_rx = _cis(kfac * d_rx, dtype) * (ak / r**2).astype(dtype)[:, None]
