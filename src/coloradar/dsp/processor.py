@@ -13,7 +13,9 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
       → range FFT, keep the first num_range_bins → Doppler FFT
       × exp(−j2π k t/(n·Ntx))      (TDM-MIMO compensation)            = range_doppler(adc)
       → Σ|·|² over channels        (non-coherent)                     = range_doppler_power(adc)
-      → CFAR (Doppler circular, range mirrored) → local maxima → angle per detection = detect(adc)
+      → CFAR (Doppler circular, range truncated) → peaks → every significant angle peak of
+        each cell → beam grouping, sidelobe guard → points from the array's phase centre
+                                                                        = detect(adc)
       → unique virtual elements → 2D angle FFT per cell → peak over Doppler      = heatmap(adc)
 """
 

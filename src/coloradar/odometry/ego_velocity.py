@@ -126,7 +126,7 @@ class EgoVelocityConfig:
     planar: bool = False
     max_speed: float = 10.0
     ambiguity_distance: float = 0.2
-    ambiguity_ratio: float = 0.6
+    ambiguity_ratio: float = 0.8
     min_inlier_fraction: float = 0.3
 
     def __post_init__(self) -> None:
@@ -518,7 +518,7 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
         ok, reason = False, (f"the estimate {np.round(v, 2).tolist()} m/s lies outside the "
                              f"prior's gate around {np.round(prior.velocity, 2).tolist()} m/s")
     elif period is not None and all_hyp is not None and all_hyp.shape[0]:
-        alt = _alias_alternative(d, b, weight, all_hyp, v, cfg)
+        alt = _alias_alternative(d, b, weight, all_hyp, v, cfg, inl)
         if alt is not None:
             v_alt, w_alt = alt
             w_best = float(weight[inl].sum())
@@ -533,8 +533,11 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
 
 
 def _alias_alternative(d: np.ndarray, b: np.ndarray, weight: np.ndarray, hyp: np.ndarray,
-                       v: np.ndarray, cfg: EgoVelocityConfig) -> tuple[np.ndarray, float] | None:
-    """The best velocity more than ``ambiguity_distance`` from ``v`` and its weighted support.
+                       v: np.ndarray, cfg: EgoVelocityConfig, inliers: np.ndarray
+                       ) -> tuple[np.ndarray, float] | None:
+    """The best velocity more than ``ambiguity_distance`` from ``v`` and the weighted support
+    it shares with ``v``'s inliers (the same points explained both ways: aliasing; a moving
+    object's motion explains other points and is no ambiguity).
 
     The hypothesis of least MSAC cost outside that distance is refined like the estimate;
     None when none exists or it converges back to ``v``.
@@ -548,4 +551,4 @@ def _alias_alternative(d: np.ndarray, b: np.ndarray, weight: np.ndarray, hyp: np
                                 np.ones(d.shape[0], dtype=bool))
     if np.linalg.norm(v_alt - v) <= cfg.ambiguity_distance or inl_alt.sum() < cfg.min_inliers:
         return None
-    return v_alt, float(weight[inl_alt].sum())
+    return v_alt, float(weight[inl_alt & inliers].sum())
