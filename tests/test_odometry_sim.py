@@ -8,7 +8,6 @@ synthesized from the simulator's scatterers with a moving object as large as the
 from __future__ import annotations
 
 import collections
-
 import json
 import warnings
 
