@@ -151,10 +151,15 @@ def steering(grid: AngleGrid, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
     numpy.ndarray
         complex64 ``(M, K)``.
     """
-    phase = np.pi * grid.rho * (grid.azimuth_sign * grid.az_pos[:, None] * np.asarray(uy)[None, :]
-                                + grid.elevation_sign * grid.el_pos[:, None]
-                                * np.asarray(uz)[None, :])
-    return np.exp(1j * phase).astype(np.complex64)
+    # float32 phases (at most a few hundred radians: ~3e-5 rad of rounding) and cos/sin
+    a = np.float32(np.pi * grid.rho * grid.azimuth_sign) * grid.az_pos.astype(np.float32)
+    b = np.float32(np.pi * grid.rho * grid.elevation_sign) * grid.el_pos.astype(np.float32)
+    phase = (a[:, None] * np.asarray(uy, dtype=np.float32)[None, :]
+             + b[:, None] * np.asarray(uz, dtype=np.float32)[None, :])
+    out = np.empty(phase.shape, dtype=np.complex64)
+    out.real = np.cos(phase)
+    out.imag = np.sin(phase)
+    return out
 
 
 def row_profile(grid: AngleGrid, vectors: np.ndarray, workers: int = 1) -> np.ndarray:
@@ -268,9 +273,11 @@ def newton_refine(grid: AngleGrid, vectors: np.ndarray, uy: np.ndarray, uz: np.n
     for _ in range(iterations):
         z = beam(uy, uz)
         bv = z.sum(axis=1)
-        # (complex @ complex: numpy has no BLAS path for complex @ real)
-        by, bz = 1j * (z @ ca), 1j * (z @ cb_)
-        byy, bzz, byz = -(z @ caa), -(z @ cbb), -(z @ cab)
+        # (einsum, not BLAS: deterministic whatever the threads)
+        by, bz = 1j * np.einsum("km,m->k", z, ca), 1j * np.einsum("km,m->k", z, cb_)
+        byy = -np.einsum("km,m->k", z, caa)
+        bzz = -np.einsum("km,m->k", z, cbb)
+        byz = -np.einsum("km,m->k", z, cab)
         cb = np.conj(bv)
         gy = 2 * np.real(cb * by)
         gz = 2 * np.real(cb * bz)
@@ -328,6 +335,7 @@ class NearField:
         """complex64 ``(M, K)``: ``exp(−jk·q_m)`` for directions ``unit`` ``(K, 3)`` and
         ranges ``rng`` ``(K,)`` [m] from the phase centre."""
         u = np.asarray(unit, dtype=np.float64)
-        q = (self._sq[:, None] - (self.tx @ u.T) ** 2 - (self.rx @ u.T) ** 2) \
+        q = (self._sq[:, None] - np.einsum("mi,ki->mk", self.tx, u) ** 2
+             - np.einsum("mi,ki->mk", self.rx, u) ** 2) \
             / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))[None, :]
         return np.exp(-1j * self.wavenumber * q).astype(np.complex64)

@@ -932,8 +932,10 @@ class RadarProcessor:
         if x.shape[0] == 0:
             return np.zeros(0), np.zeros(0)
         wa = self._steer(uy, np.zeros(uy.size), rho)                   # (M, P)
-        rows = (x * wa.T) @ self._row_of                                # (P, rows)
-        bz = np.abs(rows @ self._row_steer) ** 2                        # (P, n_el)
+        # (einsum, not BLAS: threaded BLAS sums in an order that varies between runs, and
+        # batch processing promises the bytes of serial processing)
+        rows = np.einsum("pm,pm,mr->pr", x, wa.T, self._row_of)          # (P, rows)
+        bz = np.abs(np.einsum("pr,re->pe", rows, self._row_steer)) ** 2  # (P, n_el)
         vis = uy[:, None] ** 2 + g.el_sines[None, :] ** 2 <= 1.0
         bz = np.where(vis, bz, 0.0)
         ie = np.argmax(bz, axis=1)
@@ -956,7 +958,7 @@ class RadarProcessor:
         a[cell_of, :, rank] = np.conj(w.T)
         xc = np.zeros((ncell, m), dtype=np.complex128)
         xc[cell_of] = x
-        gram = np.conj(a.transpose(0, 2, 1)) @ a                       # (C, n, n)
+        gram = np.einsum("cmi,cmj->cij", np.conj(a), a)                 # (C, n, n)
         used = np.zeros((ncell, nmax), dtype=bool)
         used[cell_of, rank] = True
         idx = np.arange(nmax)
