@@ -950,7 +950,15 @@ class RadarProcessor:
     def _joint_amplitudes(x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
                           rank: np.ndarray) -> np.ndarray:
         """Least-squares amplitudes of every cell's sources, batched: the sources of a cell
-        are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak."""
+        are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak. A cell
+        with one source gets its beam value; only cells with several are solved."""
+        out = np.einsum("pm,mp->p", x, w) / float(w.shape[0])
+        counts = np.bincount(cell_of)
+        multi = counts[cell_of] > 1
+        if not multi.any():
+            return out
+        x, w, rank = x[multi], w[:, multi], rank[multi]
+        _, cell_of = np.unique(cell_of[multi], return_inverse=True)
         ncell = int(cell_of.max()) + 1
         nmax = int(rank.max()) + 1
         m = w.shape[0]
@@ -965,7 +973,8 @@ class RadarProcessor:
         gram[:, idx, idx] += np.where(used, 0.0, 1.0)                   # padded columns
         rhs = np.einsum("cmn,cm->cn", np.conj(a), xc)
         sol = np.linalg.solve(gram, rhs[..., None])[..., 0]
-        return sol[cell_of, rank]
+        out[multi] = sol[cell_of, rank]
+        return out
 
     def _beam_noise_factor(self, sig2: np.ndarray | None) -> float:
         """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""
