@@ -26,6 +26,7 @@ from .dead_reckoning import (
 from .ego_velocity import (
     EgoVelocity,
     EgoVelocityConfig,
+    VelocityPrior,
     estimate_ego_velocity,
     static_inlier_threshold,
 )
@@ -91,6 +92,7 @@ __all__ = [
     "RioConfig",
     "RioResult",
     "VelocityErrors",
+    "VelocityPrior",
     "absolute_trajectory_error",
     "apply_alignment",
     "associate_trajectories",
