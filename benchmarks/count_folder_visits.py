@@ -14,6 +14,13 @@ How it counts (the same rule before and after a refactor, so the figures compare
 
 Printed: the walk of stays, stays per module, and the returns (stays beyond a module's first).
 
+A second walk follows the folder *on disk*: the module whose code touches the file system for
+the folder (a ``pathlib`` method on a path under ``out``, or a call of ``os``/``io``
+``scandir, stat, open, unlink, replace, rename, mkdir, rmdir, chmod`` from a function about the
+folder) is noted at each touch, with the same reading rule (each function once) and the same
+collapsing into stays: it says how many modules hold knowledge of the folder's files and how
+often the walk goes back and forth between them.
+
 Run:  PYTHONPATH=src python benchmarks/count_folder_visits.py
 """
 
@@ -63,9 +70,25 @@ def main() -> None:
     # Stack entries: (code, about-the-folder module or None, skipped)
     stack: list[tuple] = []
     rooms: list[str] = []
+    disk: list[str] = []
+    fs_methods = {"exists", "is_dir", "is_file", "stat", "unlink", "mkdir", "open", "read_text",
+                  "write_text", "read_bytes", "write_bytes", "rename", "replace", "iterdir",
+                  "rmdir", "touch", "lstat", "is_symlink"}
+    fs_calls = {"scandir", "stat", "open", "unlink", "remove", "replace", "rename", "mkdir",
+                "makedirs", "rmdir", "chmod", "listdir", "lstat"}
+
+    def touch() -> None:
+        for _code, _mod, skipped, pmod in reversed(stack):
+            if pmod is None:
+                continue
+            if not skipped and (not disk or disk[-1] != pmod):
+                disk.append(pmod)
+                if os.environ.get("VISITS_DEBUG"):
+                    print("touch", pmod, _code.co_name, file=sys.stderr)
+            return
 
     def room() -> str | None:
-        for _code, mod, skipped in reversed(stack):
+        for _code, mod, skipped, _pmod in reversed(stack):
             if skipped:
                 return None
             if mod:
@@ -82,7 +105,10 @@ def main() -> None:
             code = frame.f_code
             parent_skipped = bool(stack) and stack[-1][2]
             if not code.co_filename.startswith(pkg):
-                stack.append((code, None, parent_skipped))
+                if (code.co_filename.endswith("pathlib.py") and code.co_name in fs_methods
+                        and _carries(frame.f_locals.get("self"), out)):
+                    touch()
+                stack.append((code, None, parent_skipped, None))
                 return
             skipped = parent_skipped or code in seen_edges
             seen_edges.add(code)
@@ -92,9 +118,15 @@ def main() -> None:
             about = any(_carries(a, out) for a in args)
             mod = (code.co_filename[len(pkg):].removesuffix(".py").replace(os.sep, ".")
                    if about else None)
-            stack.append((code, mod, skipped))
+            stack.append((code, mod, skipped,
+                          code.co_filename[len(pkg):].removesuffix(".py").replace(os.sep, ".")))
             if not skipped:
                 note()
+        elif event == "c_call":
+            if (getattr(arg, "__name__", "") in fs_calls
+                    and getattr(arg, "__module__", "") in ("posix", "os", "io", "_io", "builtins")
+                    and next((e[1] for e in reversed(stack) if e[3] is not None), None)):
+                touch()
         elif event == "return":
             if stack:
                 stack.pop()
@@ -110,6 +142,12 @@ def main() -> None:
     print(f"{len(rooms)} stays in {len(counts)} modules, "
           f"{len(rooms) - len(counts)} returns to a module left before")
     for mod, n in counts.most_common():
+        print(f"  {mod:32s} {n}")
+    dcounts = collections.Counter(disk)
+    print("on disk:", " -> ".join(disk))
+    print(f"{len(disk)} stays in {len(dcounts)} modules touching the folder, "
+          f"{len(disk) - len(dcounts)} returns to a module left before")
+    for mod, n in dcounts.most_common():
         print(f"  {mod:32s} {n}")
 
 

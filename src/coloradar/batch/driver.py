@@ -268,7 +268,7 @@ def _tasks(jobs: list[_RunJob], opts: ProcessingJob,
     calib = opts.calib
     cal = calib if isinstance(calib, Calibration) or calib is None else str(Path(calib).resolve())
     for job in jobs:
-        run, out = str(job.target.path.resolve()), str(job.target.out.resolve())
+        run, out = str(job.target.path.resolve()), job.folder.location
         for rj in job.radars:
             ids = rj.stream.frame_ids
             for s in range(0, len(rj.todo), opts.chunk_size):
@@ -289,7 +289,7 @@ def _run_chunks(active: list[_RunJob], opts: ProcessingJob, prods: tuple[str, ..
                 report: BatchReport, bar: Progress) -> None:
     """Finish the radars with nothing to do, hand the others' chunks to the executor, record
     what comes back, and finish each radar as its last chunk returns."""
-    chunks = {(str(job.target.out.resolve()), rj.radar): (job, rj)
+    chunks = {(job.folder.location, rj.radar): (job, rj)
               for job in active for rj in job.radars}
     for job in active:
         for rj in job.radars:

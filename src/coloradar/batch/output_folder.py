@@ -264,6 +264,11 @@ class ProcessedRun:
         return self.root / COLORADAR.frame(f"{radar}/{product}").frame_path(frame_id)
 
     @property
+    def location(self) -> str:
+        """The folder as an absolute path string: how it travels to workers (and names them)."""
+        return str(self.root.resolve())
+
+    @property
     def manifest_path(self) -> Path:
         """``<root>/process_manifest.json``."""
         return self.root / MANIFEST
