@@ -300,7 +300,8 @@ def _run_chunks(active: list[_RunJob], opts: ProcessingJob, prods: tuple[str, ..
         report.executor = "nothing to do"
         return
     # No more workers than tasks: one task runs here, without a pool.
-    ex = opts.executor or make_executor(min(opts.jobs or os.cpu_count() or 1, n_tasks))
+    ex = (opts.executor if opts.executor is not None
+          else make_executor(min(opts.jobs or os.cpu_count() or 1, n_tasks)))
     try:
         report.executor = ex.description
         tasks = _tasks(active, opts, prods)
