@@ -39,12 +39,12 @@ from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError, MissingDataError, OutputExistsError
 from ..formats import heatmap_nbytes
-from ..formats.atomic import make_output_dir
+from ..formats.atomic import clean_partial_files, make_output_dir
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, WorkerStartupError, make_executor
 from .manifest import calibration_fingerprint, input_versions, settings_record
-from .output_folder import PRODUCTS, ProcessedRun, RadarProducts, clean_partial_files
+from .output_folder import PRODUCTS, ProcessedRun, RadarProducts
 from .report import REPORT, BatchReport, RadarOutcome, RunOutcome
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "ProcessingJob", "RunTarget", "check_products", "process",

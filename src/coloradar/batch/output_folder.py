@@ -53,7 +53,7 @@ from ..errors import (
     OutputExistsError,
     WriteError,
 )
-from ..formats.atomic import make_output_dir, write_text_if_changed
+from ..formats.atomic import clean_partial_files, make_output_dir, write_text_if_changed
 from ..formats.layout import COLORADAR, LAYOUTS, PROCESS_PRODUCTS
 from ..formats.source import read_file_text
 from ..formats.text import format_timestamps
@@ -71,7 +71,6 @@ __all__ = [
     "OutputLock",
     "ProcessedRun",
     "RadarProducts",
-    "clean_partial_files",
     "frame_file",
     "is_valid_size",
     "output_paths",
@@ -87,8 +86,6 @@ LOCK = ".process.lock"
 PREFIX = {p: COLORADAR.frame(f"cascade/{p}").prefix for p in PRODUCTS}
 POINT_BYTES = 5 * 4
 _FRAME_RE = re.compile(r"^(?P<prefix>[a-z_]+)_(?P<num>\d+)\.bin$")
-# atomic_write_bytes's temporary names: ".<final name>.<random>.tmp"
-_PARTIAL_RE = re.compile(r"^\..+\.tmp$")
 # Folders of a run that ``process`` never writes: an output folder holding one is a run.
 _RUN_PARTS = tuple(dict.fromkeys(
     m for lay in LAYOUTS.values() for m in lay.run_markers
@@ -111,26 +108,6 @@ def output_paths(out: str | os.PathLike, radar: str, product: str) -> tuple[Path
 def frame_file(out: str | os.PathLike, radar: str, product: str, frame_id: int) -> Path:
     """The file of frame number ``frame_id`` of a product (named like the dataset's own)."""
     return ProcessedRun(out).frame_file(radar, product, frame_id)
-
-
-def clean_partial_files(folders: Iterable[Path], name: str | None = None) -> int:
-    """Delete temporary files of interrupted atomic writes (``.<name>.<random>.tmp``) directly
-    inside ``folders`` (only those of file ``name`` when given); returns how many."""
-    n = 0
-    for folder in folders:
-        try:
-            entries = list(os.scandir(folder))
-        except FileNotFoundError:
-            continue
-        for e in entries:
-            if (_PARTIAL_RE.match(e.name) and e.is_file()
-                    and (name is None or e.name.startswith(f".{name}."))):
-                try:
-                    os.unlink(e.path)
-                    n += 1
-                except FileNotFoundError:
-                    pass
-    return n
 
 
 def timestamps_text(frame_ids: np.ndarray, timestamps: np.ndarray, written: np.ndarray) -> str:
