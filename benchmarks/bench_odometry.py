@@ -1,6 +1,6 @@
-"""Ego-velocity RANSAC and gyro integration: coloradar against plain-loop baselines, in one run.
+"""Ego-velocity RANSAC, gyro integration and the radar-inertial EKF: speed and accuracy.
 
-    python benchmarks/bench_odometry.py [--repeat 5] [--sim SECONDS]
+    python benchmarks/bench_odometry.py [--repeat 5] [--sim SECONDS] [--rio-runs RUN ...]
 
 Prints, side by side and measured in the same process:
 
@@ -10,8 +10,15 @@ Prints, side by side and measured in the same process:
   50 to 5000 points with half of them on a moving object;
 - milliseconds to integrate 30 s of 300 Hz gyro samples with the prefix scan of
   :func:`coloradar.odometry.integrate_gyro` and with a sequential loop of Rotation products;
+- the radar-inertial EKF (:func:`coloradar.odometry.rio_odometry`) on 60 s of synthetic
+  300 Hz IMU and 10 Hz radar ego-velocities: seconds of data per second of computing (the
+  issue's goal: at least 50x real time), beside the dead-reckoning baseline on the same data;
 - with ``--sim S``: accuracy on a simulated S-second corridor run (ego-velocity RMSE of the
-  single chip's point clouds and the cascade's processed ADC, ATE of the radar+IMU baseline).
+  single chip's point clouds and the cascade's processed ADC, ATE of the radar+IMU baseline);
+- with ``--rio-runs RUN ...``: on simulated runs (``coloradar simulate ... --rest 2
+  --radar-time-offset 0.025``), the EKF (cascade, single chip, both fused) against dead
+  reckoning: final-position error and ATE (SE(3)-aligned RMSE) as % of the distance, and the
+  recovered time offset against the truth.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ import argparse
 import tempfile
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -119,12 +127,118 @@ def _sim_accuracy(seconds: float) -> None:
         print(f"distance travelled {a.path_length:.1f} m")
 
 
+def _ekf_speed(repeat: int) -> None:
+    from coloradar.calib import preset_calibration
+    from coloradar.odometry import EgoVelocityTrack, radar_inertial_odometry, rio_odometry
+    from coloradar.sim.imu import GX5_25, simulate_imu
+    from coloradar.sim.paths import EllipsePath
+    from coloradar.sim.trajectory import make_trajectory
+
+    calib = preset_calibration()
+    seconds = 60.0
+    traj = make_trajectory(EllipsePath(np.array([0.0, 0.0, 1.0]), (8.0, 4.0), 1.5, ramp=0.5),
+                           "handheld", 0)
+    rng = np.random.default_rng(0)
+    imu_t = np.arange(0.0, seconds, 1 / 300)
+    imu, *_ = simulate_imu(traj, calib.transforms["imu"].matrix(), imu_t, GX5_25, rng)
+    tracks = []
+    for radar in ("cascade", "single_chip"):
+        tr = np.arange(0.05, seconds - 0.1, 0.1)
+        st = traj.state(tr)
+        b_T_r = calib.transforms[radar].matrix()
+        vb = st.rotation.inv().apply(st.velocity) + np.cross(st.angular_velocity, b_T_r[:3, 3])
+        v = vb @ b_T_r[:3, :3] + rng.normal(0, 0.03, vb.shape)
+        m = tr.size
+        tracks.append(EgoVelocityTrack(tr, v, np.tile(np.eye(3) * 0.03**2, (m, 1, 1)),
+                                       np.full(m, 50), np.full(m, 40), np.full(m, 0.03),
+                                       np.ones(m, dtype=bool), frame=radar))
+    ekf1 = _best_ms(lambda: rio_odometry(tracks[0], calib, imu_t, imu), repeat) / 1e3
+    ekf2 = _best_ms(lambda: rio_odometry(tracks, calib, imu_t, imu), repeat) / 1e3
+    dr = _best_ms(lambda: radar_inertial_odometry(tracks[0], calib, imu_timestamps=imu_t,
+                                                  imu_rates=imu[:, 3:]), repeat) / 1e3
+    print(f"\nradar-inertial EKF on {seconds:g} s of 300 Hz IMU + 10 Hz radar velocities "
+          f"(best of {repeat}):")
+    print(f"  EKF, one radar   {ekf1:6.3f} s = {seconds / ekf1:6.0f}x real time")
+    print(f"  EKF, two radars  {ekf2:6.3f} s = {seconds / ekf2:6.0f}x real time")
+    print(f"  dead reckoning   {dr:6.3f} s = {seconds / dr:6.0f}x real time (baseline)")
+
+
+def _rio_accuracy(runs: list[str]) -> None:
+    from coloradar import open_sequence
+    from coloradar.geometry import trajectory_from_groundtruth
+    from coloradar.odometry import (
+        RioConfig,
+        absolute_trajectory_error,
+        path_length,
+        radar_inertial_odometry,
+        rio_odometry,
+    )
+    from coloradar.odometry.pipeline import _ego_velocity
+    from coloradar.sim.truth import load_truth
+
+    cfg = RioConfig()
+    print("\nEKF against dead reckoning on simulated runs: final-position error and ATE "
+          "(SE(3)-aligned RMSE), % of the distance")
+    print(f"{'run':<16} {'dist':>6} {'vmax':>5} " + " ".join(
+        f"{n:>13}" for n in ("EKF cascade", "EKF single", "EKF both (def)", "DR cascade",
+                             "DR single")) + f" {'t_d est/true':>13}")
+    rows = []
+    for run in runs:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            seq = open_sequence(run)
+            gt = trajectory_from_groundtruth(seq)
+            truth = load_truth(run)
+            tr = {r: _ego_velocity(seq, r, None, config=None, processing=None, start=None,
+                                   duration=None, stride=1, max_frames=None, seed=0,
+                                   progress=None, still_config=cfg.zero_velocity)
+                  for r in ("cascade", "single_chip")}
+            imu = seq.imu
+
+            def score(traj, gt=gt):
+                g = gt.interpolate_arrays(traj.timestamps)[0]
+                d = path_length(g)[-1]
+                end = np.linalg.norm(traj.translations[-1] - g[-1])
+                return d, 100 * end / d, absolute_trajectory_error(traj, gt).rmse_percent
+
+            cells, td = [], 0.0
+            for radars in (["cascade"], ["single_chip"], ["cascade", "single_chip"]):
+                res = rio_odometry([tr[r][0] for r in radars], seq.calib, imu.timestamps,
+                                   imu.data, groundtruth=gt, config=cfg,
+                                   still=[tr[r][1] for r in radars])
+                cells.append(score(res.trajectory))
+                if len(radars) == 2:                  # the default: the cascade's offset
+                    td = float(res.time_offset[-1, 0])
+            for r in ("cascade", "single_chip"):
+                dr = radar_inertial_odometry(tr[r][0], seq.calib, imu_timestamps=imu.timestamps,
+                                             imu_rates=imu.angular_rates, groundtruth=gt)
+                cells.append(score(dr))
+        vmax = np.linalg.norm(truth["rig_velocity_world"], axis=1).max()
+        td_true = float(truth["radar_time_offset"]) if "radar_time_offset" in truth.keys() else 0
+        name = Path(run).name
+        print(f"{name:<16} {cells[0][0]:>6.1f} {vmax:>5.2f} " + " ".join(
+            f"{c[1]:>6.2f}/{c[2]:<6.2f}" for c in cells)
+            + f" {1e3 * td:>6.1f}/{1e3 * td_true:<5.1f}ms", flush=True)
+        rows.append([c[1:] for c in cells])
+    if len(rows) > 1:
+        a = np.array(rows)                           # runs x methods x (end, ate)
+        print(f"{'worst':<16} {'':>6} {'':>5} " + " ".join(
+            f"{a[:, j, 0].max():>6.2f}/{a[:, j, 1].max():<6.2f}" for j in range(a.shape[1])))
+        print(f"{'mean':<16} {'':>6} {'':>5} " + " ".join(
+            f"{a[:, j, 0].mean():>6.2f}/{a[:, j, 1].mean():<6.2f}" for j in range(a.shape[1])))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--sim", type=float, metavar="SECONDS",
                     help="also measure accuracy on a simulated run of this length")
+    ap.add_argument("--rio-runs", nargs="+", metavar="RUN",
+                    help="simulated runs on which to compare the EKF with dead reckoning")
     args = ap.parse_args()
+    if args.rio_runs:
+        _rio_accuracy(args.rio_runs)
+        return
     cfg = EgoVelocityConfig()
     print("ego-velocity per cloud (half the points on a moving object), ms")
     print("(coloradar: default settings, up to 3 motions extracted; single: max_models=1, the "
@@ -153,6 +267,7 @@ def main() -> None:
     err = (integrate_gyro(t, w).inv() * _sequential_gyro(t, w)).magnitude().max()
     print(f"\ngyro integration, {t.size} samples: prefix scan {ours:.1f} ms, sequential loop "
           f"{base:.1f} ms ({base / ours:.0f}x); largest difference {err:.1e} rad")
+    _ekf_speed(args.repeat)
     if args.sim:
         _sim_accuracy(args.sim)
 

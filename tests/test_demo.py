@@ -39,6 +39,9 @@ def test_demo_processes_both_radars_and_matches_the_truth(demo):
     text = report.text()
     for needle in ("cascade (dsp)", "single_chip (on-board)", str(report.run_path), "done in"):
         assert needle in text
+    # which heatmap engine did the work is said (numba when the accel extra is installed)
+    engine = "numba" if importlib.util.find_spec("numba") is not None else "numpy"
+    assert report.engine == engine and f"heatmap engine: {engine}" in text
 
 
 @pytest.mark.skipif(importlib.util.find_spec("matplotlib") is None, reason="needs matplotlib")

@@ -50,10 +50,6 @@ KNOWN_DRIFT: dict[tuple[str, str], str] = {
     ("docs/odometry.md", "$ coloradar simulate sim --duration 30 --seed 3 --sensors "
                          "cascade,imu,groundtruth --quiet"):
         "the simulate output is not shown; a 30 s simulation costs about a minute",
-    ("docs/geometry.md", "import coloradar as cr"):
-        "scan 100 of a run: the shared simulated run has 59",
-    ("docs/geometry.md", "from coloradar.geometry import build_map, write_pcd"):
-        "a map from 10 s to 40 s: the shared simulated run lasts 6 s",
 }
 
 BLOCKS = [b for f in DOC_FILES for b in extract_blocks(ROOT / f, f)]

@@ -67,19 +67,20 @@ def test_engine_matches_definition(name, signs, engine):
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-@pytest.mark.parametrize("num_el", [8, 2])
-def test_engine_on_another_layout(engine, num_el):
+@pytest.mark.parametrize(("num_el", "num_az"), [(8, 32), (2, 32), (8, 24)])
+def test_engine_on_another_layout(engine, num_el, num_az):
     """Three elevation rows (0, 2, 3) and, with 2 bins, an aperture wider than the grid: the
-    kernel's general paths (not the two radars' specialised ones) against explicit steering."""
+    kernel's general paths (not the two radars' specialised ones) against explicit steering.
+    24 azimuth bins (not a power of two) take the numba engine's FFT-call path."""
     _engine_or_skip(engine)
     from coloradar.calib import AntennaConfig
     rx = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
     tx = np.array([[0.0, 0.0], [4.0, 2.0], [1.0, 3.0], [6.0, 0.0]])
     ant = AntennaConfig(77e9, rx, tx)
-    grid = angle_grid(ant, 78e9, num_el, 32)
+    grid = angle_grid(ant, 78e9, num_el, num_az)
     assert (grid.n_el == num_el) == (num_el == 8)
     g = np.random.default_rng(4)
-    m, nd, nr = grid.num_elements, 8, 5
+    m, nd, nr = grid.num_elements, 7, 19   # 19 range bins: a full block of 16 and a partial one; odd nd
     elements = (g.standard_normal((m, nd, nr)) + 1j * g.standard_normal((m, nd, nr))).astype(
         np.complex64)
     vel = np.arange(nd) - 4.0
@@ -191,3 +192,27 @@ def test_compiled_range_pass_equals_numpy(settings):
     b = RadarProcessor(calib, engine="numba", **settings).range_doppler(adc)
     assert b.shape == a.shape and b.dtype == np.complex64
     np.testing.assert_allclose(b, a, rtol=0, atol=2e-5 * np.abs(a).max())
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("num_az", [32, 24])
+def test_doppler_phase_is_applied_per_channel_and_bin(engine, num_az):
+    """``doppler_phase`` (the TDM compensation the processor hands over) equals multiplying
+    the channels first, through a channel map, on the planar (32) and FFT-call (24) paths."""
+    _engine_or_skip(engine)
+    from coloradar.calib import AntennaConfig
+    rx = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0]])
+    tx = np.array([[0.0, 0.0], [4.0, 2.0], [1.0, 3.0], [6.0, 0.0]])
+    grid = angle_grid(AntennaConfig(77e9, rx, tx), 78e9, 8, num_az)
+    g = np.random.default_rng(8)
+    m, nd, nr = grid.num_elements, 8, 7
+    cube = (g.standard_normal((m + 3, nd, nr)) + 1j * g.standard_normal((m + 3, nd, nr))).astype(
+        np.complex64)
+    channels = g.permutation(m + 3)[:m]
+    phase = np.exp(2j * np.pi * g.random((m + 3, nd))).astype(np.complex64)
+    vel = np.arange(nd) - 4.0
+    got = heatmap_from_elements(cube, grid, vel, engine=engine, channels=channels,
+                                doppler_phase=phase)
+    want = heatmap_from_elements((cube * phase[:, :, None])[channels], grid, vel, engine=engine)
+    np.testing.assert_allclose(got[..., 0], want[..., 0], rtol=1e-5)
+    assert np.mean(got[..., 1] == want[..., 1]) > 0.99

@@ -273,7 +273,7 @@ def test_cfar_window_settings(root, tmp_path, capsys):
     assert manifest["products"]["cascade/heatmaps"]["settings"]["cfar_guard"] == [1, 1]
     code, _, err = _cli(["process", root / RUN, "--out", tmp_path / "b", "--set",
                          "cfar_guard=1,2,3", "--quiet"], capsys)
-    assert code == 1 and "cfar_guard" in _one_error_line(err)
+    assert code == 2 and "cfar_guard" in _one_error_line(err)   # a usage error: exit 2
     with pytest.raises(SettingsError):
         cr.dsp.ProcessingSettings(cfar_train=(2, 8, 1))
 

@@ -51,3 +51,23 @@ def test_stage_progress_shows_every_stage_on_one_line():
     prog.close()
     last = out.getvalue().splitlines()[-1]
     assert last == "simulate: lidar 2/2  cascade 3/3"
+
+
+def test_no_eta_until_a_rate_after_the_first_unit_is_known(monkeypatch):
+    # A one-second job of 485 frames whose first frame paid 1 s of start-up once read
+    # "ETA 08:05": the first unit's time says nothing of the rate.
+    clock = [100.0]
+    monkeypatch.setattr("coloradar.progress.time.perf_counter", lambda: clock[0])
+    out = _Tty()                      # redrawn at every update
+    bar = Progress(485, "run0", stream=out, min_interval=0.0)
+    clock[0] += 1.0                   # start-up, then the first frame
+    bar.update(1)
+    assert "ETA" not in out.getvalue().rsplit("\r", 1)[-1]
+    clock[0] += 0.1                   # 99 frames in 0.1 s: 990 frames/s after start-up
+    bar.update(99)
+    last = out.getvalue().rsplit("\r", 1)[-1]
+    assert "ETA 00:00" in last        # 385 frames at 990/s: 0.39 s, not 6 minutes
+    assert abs(bar.eta() - 385 / 990) < 1e-9
+    clock[0] += 0.5
+    bar.update(385)
+    assert bar.eta() == 0.0 and "ETA 00:00" in out.getvalue().rsplit("\r", 1)[-1]

@@ -54,6 +54,9 @@ class Progress:
         self.start = time.perf_counter()
         self._last = 0.0
         self._shown: tuple[int, int] | None = None  # (done, failed) last drawn
+        # The first unit pays for start-up (imports, compiles, a pool starting): the ETA uses
+        # the rate after it, and is not shown until that rate is known.
+        self._ref: tuple[float, int] | None = None  # (time, done) at the first update
         self._ended = False
         self._tty = bool(getattr(self.stream, "isatty", lambda: False)())
         self._interval = min_interval if self._tty else max(min_interval * 10, 2.0)
@@ -64,17 +67,30 @@ class Progress:
         el = time.perf_counter() - self.start
         return self.done / el if el > 0 else 0.0
 
+    def eta(self) -> float | None:
+        """Seconds left at the rate measured since the first update, or None while no such
+        rate is known (before a second update, or when nothing is left)."""
+        if self.done >= self.total:
+            return 0.0
+        if self._ref is None:
+            return None
+        t_ref, done_ref = self._ref
+        el = time.perf_counter() - t_ref
+        if self.done <= done_ref or el <= 0:
+            return None
+        return (self.total - self.done) * el / (self.done - done_ref)
+
     def line(self) -> str:
         """The current progress line."""
         frac = self.done / self.total if self.total else 1.0
         width = 24
         bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
-        rate = self.rate
-        eta = (self.total - self.done) / rate if rate > 0 else float("inf")
+        eta = self.eta()
+        eta_text = "" if eta is None else f" ETA {_fmt_time(eta)}"
         fail = f", {self.failed} failed" if self.failed else ""
         return (f"{self.desc} [{bar}] {self.done}/{self.total} {self.unit} "
-                f"{rate:.1f} {self.unit}/s elapsed {_fmt_time(time.perf_counter() - self.start)} "
-                f"ETA {_fmt_time(eta)}{fail}")
+                f"{self.rate:.1f} {self.unit}/s elapsed "
+                f"{_fmt_time(time.perf_counter() - self.start)}{eta_text}{fail}")
 
     def __call__(self, done: int, total: int) -> None:
         """Callback form: ``done`` of ``total`` units are finished."""
@@ -86,6 +102,8 @@ class Progress:
         self.done += n
         self.failed += failed
         now = time.perf_counter()
+        if self._ref is None:
+            self._ref = (now, self.done)
         if self.enabled and (now - self._last >= self._interval or self.done >= self.total):
             self._last = now
             self._write()

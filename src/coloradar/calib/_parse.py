@@ -74,4 +74,4 @@ def check_finite(values: np.ndarray, name: str, what: str) -> None:
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
         raise CalibrationError(f"{name}: {what} should hold finite numbers; entry {int(bad[0])} "
-                               f"is {values.ravel()[bad[0]]!r} ({bad.size} such entries)")
+                               f"is {values.ravel()[bad[0]].item()} ({bad.size} such entries)")

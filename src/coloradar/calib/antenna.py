@@ -156,7 +156,7 @@ def parse_antenna_cfg(text: str, name: str = "antenna_cfg.txt") -> AntennaConfig
     if f_design is None:
         raise CalibrationError(f"{name}: missing F_design")
     if not (math.isfinite(f_design) and 1e9 <= f_design <= 1e12):
-        raise CalibrationError(f"{name}: F_design = {f_design / 1e9!r} GHz is not physically "
+        raise CalibrationError(f"{name}: F_design = {f_design / 1e9:g} GHz is not physically "
                                "sensible; expected a finite value in [1, 1000] GHz")
     arrays = {}
     for kind in ("rx", "tx"):
@@ -173,7 +173,7 @@ def parse_antenna_cfg(text: str, name: str = "antenna_cfg.txt") -> AntennaConfig
                                               for v in ants[kind][i])]
         if bad:
             az, el = ants[kind][bad[0]]
-            raise CalibrationError(f"{name}: {kind} {bad[0]} at az {az!r}, el {el!r}; expected "
+            raise CalibrationError(f"{name}: {kind} {bad[0]} at az {float(az):g}, el {float(el):g}; expected "
                                    f"finite positions within ±{_MAX_POSITION:g} half wavelengths")
     return AntennaConfig(f_design, arrays["rx"], arrays["tx"])
 

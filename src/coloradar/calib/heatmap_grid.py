@@ -47,7 +47,7 @@ class HeatmapConfig:
         for key, a in (("azimuth_bins", az), ("elevation_bins", el)):
             if not np.all(np.isfinite(a)) or np.any(np.abs(a) > np.pi / 2 + 1e-9):
                 raise CalibrationError(f"heatmap_cfg: {key} must be finite angles within "
-                                       f"±π/2 rad, got values from {a.min()!r} to {a.max()!r}")
+                                       f"±π/2 rad, got values from {float(a.min()):g} to {float(a.max()):g}")
         if np.any(np.diff(az) <= 0) or np.any(np.diff(el) <= 0):
             raise CalibrationError("heatmap_cfg: angle lists must be strictly ascending")
         if min(self.num_range_bins, self.num_azimuth_bins, self.num_elevation_bins) <= 0 or max(

@@ -92,7 +92,7 @@ def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.tx
     check_finite(ph, name, "phaseCalibrationMatrix")
     for key, v, lo, hi in (("frequencySlope", slope, 1e9, 1e16), ("samplingRate", fs, 1e4, 1e9)):
         if not (math.isfinite(v) and lo <= v <= hi):
-            raise CalibrationError(f"{name}: {key} = {v!r} is not physically sensible; expected "
+            raise CalibrationError(f"{name}: {key} = {float(v):g} is not physically sensible; expected "
                                    f"a finite value in [{lo:g}, {hi:g}]")
     phase = (ph[0::2] + 1j * ph[1::2]).reshape(ntx, nrx)
     return PhaseFrequencyCalib(freq.reshape(ntx, nrx), phase, slope, fs)

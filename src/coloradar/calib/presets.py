@@ -79,4 +79,6 @@ def preset_radar(name: str) -> RadarCalib:
 def preset_calibration() -> Calibration:
     """The built-in calibration of the whole rig."""
     return Calibration(preset_radar("cascade"), preset_radar("single_chip"),
-                       dict(PRESET_TRANSFORMS), "preset")
+                       dict(PRESET_TRANSFORMS), "preset",
+                       ("cascade radar", "single_chip radar",
+                        *(f"{s} extrinsic" for s in PRESET_TRANSFORMS)))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -126,12 +126,27 @@ class Calibration:
         ``imu``, ``vicon``).
     source
         Where it was read from, or ``"preset"``.
+    presets
+        The values that are not the calibration's own but built-in presets (the real rig's),
+        e.g. ``("lidar extrinsic",)`` or ``("single_chip radar",)``: what a user must be told
+        whenever they are used (:meth:`preset_note`).
     """
 
     cascade: RadarCalib
     single_chip: RadarCalib
     transforms: Mapping[str, Extrinsic] = field(default_factory=dict)
     source: str = "preset"
+    presets: tuple[str, ...] = ()
+
+    def preset_note(self, values: Iterable[str] | None = None) -> str:
+        """One line saying which of ``values`` (default: all) are built-in presets, e.g.
+        ``"calibration: built-in preset for lidar extrinsic (not this run's own)"``; empty
+        when none is."""
+        wanted = self.presets if values is None else [v for v in values if v in self.presets]
+        if not wanted:
+            return ""
+        return (f"calibration: built-in preset{'s' if len(wanted) > 1 else ''} for "
+                f"{', '.join(wanted)} (not this run's own)")
 
     def radar(self, name: str) -> RadarCalib:
         """The calibration of radar ``name`` (``"cascade"`` or ``"single_chip"``)."""
@@ -208,6 +223,7 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
     lay = get_layout(layout)
     src = path if isinstance(path, Source) else _calib_source(path)
     radars = {}
+    preset_values: list[str] = []
     for name in RADARS:
         if src.is_dir(name):
             try:
@@ -218,19 +234,32 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
             if name in lay.calib_radars:
                 warnings.warn(f"{src.location}: no {name}/ calibration; using the built-in "
                               "preset", CalibrationWarning, stacklevel=2)
+                preset_values.append(f"{name} radar")
             radars[name] = presets.preset_radar(name)
     transforms = dict(presets.PRESET_TRANSFORMS)
     sensor_of = {fname: sensor for sensor, fname in lay.transforms.items()}
+    own: set[str] = set()
     if src.is_dir("transforms"):
         for fname in src.listdir("transforms"):
             if fname.startswith("base_to_") and fname.endswith(".txt"):
                 rel = f"transforms/{fname}"
                 sensor = sensor_of.get(fname, fname[len("base_to_"):-4])
                 transforms[sensor] = parse_transform(src.read_text(rel), src.describe(rel))
+                own.add(sensor)
+        missing = [s for s in lay.transforms if s not in own]
+        if missing:
+            warnings.warn(f"{src.location}: no transforms/"
+                          f"{', '.join(lay.transforms[s] for s in missing)}; using the built-in "
+                          f"preset extrinsic{'s' if len(missing) > 1 else ''} of "
+                          f"{', '.join(missing)} (the real rig's, not this calibration's)",
+                          CalibrationWarning, stacklevel=2)
     else:
-        warnings.warn(f"{src.location}: no transforms/ folder; using the built-in rig extrinsics",
-                      CalibrationWarning, stacklevel=2)
-    return Calibration(radars["cascade"], radars["single_chip"], transforms, src.location)
+        missing = list(lay.transforms)
+        warnings.warn(f"{src.location}: no transforms/ folder; using the built-in rig extrinsics "
+                      f"of {', '.join(missing)}", CalibrationWarning, stacklevel=2)
+    preset_values += [f"{s} extrinsic" for s in missing]
+    return Calibration(radars["cascade"], radars["single_chip"], transforms, src.location,
+                       tuple(preset_values))
 
 
 def write_calibration(calib: Calibration, folder: str | os.PathLike[str], *,

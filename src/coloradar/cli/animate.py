@@ -6,7 +6,14 @@ import argparse
 
 from ..dataset import open_sequence
 from ..progress import Progress
-from ._common import add_file_output_args, new_output_file
+from ._common import (
+    add_file_output_args,
+    add_quiet_arg,
+    new_output_file,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,16 +26,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "viewer instead (pip install 'coloradar[rerun]'; world frame, all frames).")
     p.add_argument("run", help="run folder or .zip")
     p.add_argument("--out", required=True, help="output .mp4, .gif or .rrd")
-    p.add_argument("--start", type=float, default=0.0,
+    p.add_argument("--start", type=non_negative_float, default=0.0,
                    help="seconds after the run's start (its first ground-truth pose)")
-    p.add_argument("--duration", type=float, help="seconds to render (default: to the end)")
-    p.add_argument("--fps", type=float, default=10.0, help="pictures per second (default 10)")
+    p.add_argument("--duration", type=positive_float, help="seconds to render (default: to the end)")
+    p.add_argument("--fps", type=positive_float, default=10.0, help="pictures per second (default 10)")
     p.add_argument("--coords", default="base",
                    help="frame: base (default), world, or a sensor name (e.g. cascade)")
     p.add_argument("--view", default="bev", choices=("bev", "3d"), help="bird's-eye or 3-D")
-    p.add_argument("--extent", type=float, default=20.0, help="half-width of the view [m]")
-    p.add_argument("--dpi", type=int, default=100, help="resolution (default 100: 800x720 px)")
+    p.add_argument("--extent", type=positive_float, default=20.0, help="half-width of the view [m]")
+    p.add_argument("--dpi", type=positive_int, default=100, help="resolution (default 100: 800x720 px)")
     add_file_output_args(p)
+    add_quiet_arg(p)
     p.set_defaults(func=run)
 
 
@@ -41,11 +49,13 @@ def run(args: argparse.Namespace) -> int:
         from ..viz.rerun_log import log_run_rrd
 
         log_run_rrd(seq, out, start=args.start, duration=args.duration,
-                    overwrite=args.overwrite, progress=Progress(0, "recording"))
-        print(f"{out}: {seq.name} from {args.start:g} s (open with: rerun {out})")
+                    overwrite=args.overwrite, progress=Progress(0, "recording", enabled=not args.quiet))
+        if not args.quiet:
+            print(f"{out}: {seq.name} from {args.start:g} s (open with: rerun {out})")
         return 0
     animate_run(seq, out, start=args.start, duration=args.duration, fps=args.fps,
                 frame=args.coords, view=args.view, extent=args.extent, dpi=args.dpi,
-                overwrite=args.overwrite, progress=Progress(0, "pictures"))
-    print(f"{out}: {seq.name} from {args.start:g} s")
+                overwrite=args.overwrite, progress=Progress(0, "pictures", enabled=not args.quiet))
+    if not args.quiet:
+        print(f"{out}: {seq.name} from {args.start:g} s")
     return 0

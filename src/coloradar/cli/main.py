@@ -12,6 +12,7 @@ import warnings
 
 from .. import __version__
 from ..errors import ColoradarError
+from ._common import UsageError, cli_wording
 
 __all__ = ["build_parser", "main"]
 
@@ -43,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     # Data-defect warnings are part of the output: print them once, briefly.
     warnings.simplefilter("once")
-    warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
+    warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {cli_wording(str(msg))}\n"
     try:
         code = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler below
@@ -57,8 +58,12 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError):
             pass
         return 141  # 128 + SIGPIPE, what a shell reports for a command ended by a closed pipe
+    except UsageError as exc:
+        # argparse's convention, whichever check found it: usage errors exit 2.
+        print(f"coloradar: error: {exc} (see: coloradar {args.command} --help)", file=sys.stderr)
+        return 2
     except ColoradarError as exc:
-        print(f"coloradar: error: {exc}", file=sys.stderr)
+        print(f"coloradar: error: {cli_wording(str(exc))}", file=sys.stderr)
         return 1
     except OSError as exc:
         # Every file coloradar reads or writes goes through a helper that raises a named error;

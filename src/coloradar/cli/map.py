@@ -9,7 +9,14 @@ from ..dataset import open_sequence
 from ..geometry import MAP_SOURCES, build_map, write_point_file
 from ..geometry.cloud_io import check_point_file_name
 from ..progress import Progress
-from ._common import add_file_output_args, new_output_file
+from ._common import (
+    add_file_output_args,
+    add_quiet_arg,
+    new_output_file,
+    non_negative_float,
+    positive_float,
+    positive_int,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,17 +31,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="whose point clouds (default: lidar)")
     p.add_argument("--products",
                    help="output folder of 'coloradar process' for this run: radar point "
-                        "clouds are read from it (the cascade has none of its own)")
-    p.add_argument("--start", type=float, default=0.0,
+                        "clouds are read from it (default: the radar's own point clouds, or "
+                        "computed from its ADC frames when it has none, as the cascade)")
+    p.add_argument("--start", type=non_negative_float, default=0.0,
                    help="window start, seconds after the first ground-truth pose (default 0)")
-    p.add_argument("--duration", type=float, help="window length in seconds (default: to the end)")
-    p.add_argument("--voxel", type=float, help="voxel size in metres for down-sampling")
-    p.add_argument("--stride", type=int, default=1, help="use every N-th frame (default 1)")
-    p.add_argument("--min-range", type=float, default=0.0,
+    p.add_argument("--duration", type=positive_float, help="window length in seconds (default: to the end)")
+    p.add_argument("--voxel", type=positive_float, help="voxel size in metres for down-sampling")
+    p.add_argument("--stride", type=positive_int, default=1, help="use every N-th frame (default 1)")
+    p.add_argument("--min-range", type=non_negative_float, default=0.0,
                    help="drop points closer to the sensor than this [m] (the rig itself)")
-    p.add_argument("--max-range", type=float, help="drop points farther than this [m]")
+    p.add_argument("--max-range", type=positive_float, help="drop points farther than this [m]")
     p.add_argument("--ascii", action="store_true", help="write ascii instead of binary")
     add_file_output_args(p)
+    add_quiet_arg(p)
     p.set_defaults(func=run)
 
 
@@ -44,8 +53,16 @@ def run(args: argparse.Namespace) -> int:
     m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
                   voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,
                   min_range=args.min_range,
-                  progress=Progress(0, f"{args.sensor} frames"))
+                  progress=Progress(0, f"{args.sensor} frames", enabled=not args.quiet))
     write_point_file(out, m.points, m.fields, binary=not args.ascii, overwrite=args.overwrite)
-    print(f"{out}: {len(m.points):,} points from {m.frame_indices.size} {args.sensor} frames "
-          f"({', '.join(m.fields)}, world frame)", file=sys.stdout)
+    if not args.quiet:
+        src = ", points computed from their ADC" if m.points_from == "adc" else ""
+        print(f"{out}: {len(m.points):,} points from {m.frame_indices.size} {args.sensor} "
+              f"frames{src} ({', '.join(m.fields)}, world frame)", file=sys.stdout)
+    # Said every time (the CalibrationWarning shows once, when the calibration is loaded).
+    used = [f"{args.sensor} extrinsic"] + ([f"{args.sensor} radar"] if m.points_from == "adc"
+                                           else [])
+    note = seq.calib.preset_note(used)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
     return 0

@@ -1,18 +1,23 @@
-"""``coloradar odometry RUN --out DIR``: radar ego-velocity and radar–inertial dead reckoning."""
+"""``coloradar odometry RUN --out DIR``: radar ego-velocity and radar-inertial odometry (EKF or
+dead reckoning)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
 from ..dataset import open_sequence
+from ..errors import SettingsError
 from ..odometry import (
+    ESTIMATORS,
     ORIENTATION_SOURCES,
     SOURCES,
     ego_velocity_config,
     path_length,
     run_odometry,
 )
+from ..odometry.rio import RioConfig
 from ..progress import Progress
 
 
@@ -20,10 +25,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "odometry", help="estimate radar ego-velocity and a radar-inertial trajectory",
         description="Estimate the radar's velocity in every frame from the range rates of its "
-                    "point cloud (RANSAC + least squares), integrate it with the gyro attitude "
-                    "into the rig's trajectory, and write DIR/ego_velocity.csv, "
-                    "DIR/trajectory.txt (TUM: timestamp x y z qx qy qz qw) and "
-                    "DIR/odometry.json. Evaluate with 'coloradar evaluate DIR'.")
+                    "point cloud (RANSAC + least squares) and fuse it with the IMU in an "
+                    "error-state EKF (IMU propagation, radar velocity updates, automatic "
+                    "zero-velocity updates, online IMU biases and radar time offset; "
+                    "--estimator dead-reckoning: the gyro-attitude baseline), and write "
+                    "DIR/ego_velocity.csv, DIR/trajectory.txt (TUM: timestamp x y z qx qy qz "
+                    "qw) and DIR/odometry.json (settings; for the filter its biases, time "
+                    "offset and per-pose covariance). Evaluate with 'coloradar evaluate DIR'.")
     p.add_argument("run", help="run folder or .zip")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--radar", choices=("cascade", "single_chip"), default="cascade",
@@ -32,9 +40,29 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="point clouds from: the sensor's own point clouds (single chip), raw "
                         "ADC frames (processed with coloradar.dsp), or heatmaps; default: "
                         "pointclouds when present, else adc, else heatmaps")
+    p.add_argument("--estimator", choices=ESTIMATORS, default="rio",
+                   help="rio: the radar-inertial error-state EKF (default); dead-reckoning: "
+                        "ego-velocities integrated with the gyro attitude (the baseline)")
+    p.add_argument("--fuse", choices=("cascade", "single_chip"), action="append", default=None,
+                   metavar="RADAR",
+                   help="filter: also update it with this radar's ego-velocities (default: "
+                        "the other radar when the run has its data)")
+    p.add_argument("--no-fuse", action="store_true",
+                   help="filter: use the --radar radar only")
+    p.add_argument("--no-time-offset", action="store_true",
+                   help="filter: do not estimate the radar-IMU time offset")
+    p.add_argument("--time-offset", type=float, default=0.0, metavar="S",
+                   help="filter: initial radar-IMU time offset t_d [s] (a frame stamped t "
+                        "shows the motion at IMU time t + t_d; default 0)")
+    p.add_argument("--no-extrinsic-rotation", action="store_true",
+                   help="filter: take the radar's extrinsic rotation as exact (default: "
+                        "refine it online, the calibration's as prior)")
+    p.add_argument("--imu-noise-scale", type=float, default=1.0, metavar="K",
+                   help="filter: multiply the IMU noise densities and bias walks of the "
+                        "3DM-GX5-25 datasheet by K (default 1)")
     p.add_argument("--orientation", choices=ORIENTATION_SOURCES, default="imu",
-                   help="attitude from the IMU gyro (default) or from the ground truth "
-                        "(an upper bound)")
+                   help="dead reckoning: attitude from the IMU gyro (default) or from the "
+                        "ground truth (an upper bound)")
     p.add_argument("--threshold", type=float,
                    help="inlier threshold on range-rate residuals [m/s] (default from the "
                         "radar's Doppler resolution)")
@@ -43,8 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="estimate vx vy vz (3d) or vx vy with vz = 0 (planar); auto: planar for "
                         "a radar with fewer than 3 elevation rows (the single chip)")
     p.add_argument("--gyro-bias-window", type=float, metavar="S",
-                   help="the rig is at rest for the first S seconds of the IMU stream: subtract "
-                        "their mean rate as gyro bias")
+                   help="dead reckoning: the rig is at rest for the first S seconds of the IMU "
+                        "stream: subtract their mean rate as gyro bias")
     p.add_argument("--start", type=float, help="seconds after the first radar frame")
     p.add_argument("--duration", type=float, help="seconds to process (default: to the end)")
     p.add_argument("--stride", type=int, default=1, help="use every N-th frame (default 1)")
@@ -66,16 +94,38 @@ def run(args: argparse.Namespace) -> int:
     if args.model != "auto":
         overrides["planar"] = args.model == "planar"
     cfg = ego_velocity_config(seq.calib.radar(args.radar), **overrides)
+    base = RioConfig()
+    k = args.imu_noise_scale
+    if not (k > 0 and k < float("inf")):
+        raise SettingsError(f"--imu-noise-scale must be a positive number, got {k}")
+    rio = replace(base, estimate_time_offset=not args.no_time_offset,
+                  time_offset=args.time_offset,
+                  estimate_extrinsic_rotation=not args.no_extrinsic_rotation,
+                  accel_noise_density=base.accel_noise_density * k,
+                  gyro_noise_density=base.gyro_noise_density * k,
+                  accel_bias_walk=base.accel_bias_walk * k,
+                  gyro_bias_walk=base.gyro_bias_walk * k)
     progress = None if args.quiet else Progress(0, f"{args.radar} frames")
     res = run_odometry(seq, args.out, radar=args.radar, source=args.source,
                        orientation=args.orientation, config=cfg, start=args.start,
                        duration=args.duration, stride=args.stride, seed=args.seed,
                        gyro_bias_window=args.gyro_bias_window, overwrite=args.overwrite,
-                       progress=progress)
+                       progress=progress, estimator=args.estimator, rio_config=rio,
+                       fuse=() if args.no_fuse else
+                       ("auto" if args.fuse is None else tuple(args.fuse)))
     tr, traj = res.track, res.trajectory
     dist = float(path_length(traj.translations)[-1])
     print(f"{seq.name}: {int(tr.ok.sum())}/{len(tr)} {args.radar} frames with an ego-velocity; "
           f"trajectory of {len(traj)} poses, {dist:.1f} m travelled", file=sys.stdout)
+    if args.estimator == "rio":
+        import json
+
+        info = json.loads(res.files[2].read_text(encoding="utf-8"))["rio"]
+        td = ", ".join(f"{r} {1e3 * t:+.1f} ± {1e3 * s:.1f} ms" for r, t, s in zip(
+            info["radars"], info["time_offset_s"], info["time_offset_std_s"], strict=True))
+        print(f"  filter: time offset {td}; {info['static_frames']} static frames; gyro bias "
+              f"{', '.join(f'{x:+.5f}' for x in info['gyro_bias_rad_s'])} rad/s, accel bias "
+              f"{', '.join(f'{x:+.4f}' for x in info['accel_bias_m_s2'])} m/s²")
     for path in res.files:
         print(f"  wrote {path}")
     return 0

@@ -6,7 +6,7 @@ import argparse
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ._common import add_file_output_args
+from ._common import add_file_output_args, add_quiet_arg, positive_float, positive_int
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--view", required=True,
                    choices=("range-doppler", "range-azimuth", "heatmap", "scene"))
     p.add_argument("--frame", type=int, default=0,
-                   help="frame index (of the radar's stream; for scene, of --stream)")
+                   help="frame index (of the radar's stream; for scene, of --stream; "
+                        "default: %(default)s, the first)")
     p.add_argument("--out", required=True, help="output image (.png, .pdf, .svg)")
     p.add_argument("--radar", choices=RADARS,
                    help="which radar (default: cascade; for scene, both radars; a radar named "
@@ -31,14 +32,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scene-view", default="bev", choices=("bev", "3d"),
                    help="scene: bird's-eye (default) or 3-D")
     p.add_argument("--stream", help="scene: the stream --frame counts in (e.g. lidar/pointclouds)")
-    p.add_argument("--extent", type=float, default=20.0, help="scene half-width [m]")
+    p.add_argument("--extent", type=positive_float, default=20.0, help="scene half-width [m]")
     p.add_argument("--polar", action="store_true",
                    help="range-azimuth on azimuth/range axes instead of a bird's-eye view")
     p.add_argument("--slice", default="azimuth-range",
                    choices=("azimuth-range", "elevation-azimuth"), help="heatmap slice")
-    p.add_argument("--max-range", type=float, help="clip the range axis [m]")
-    p.add_argument("--dpi", type=int, default=100, help="image resolution (default 100)")
+    p.add_argument("--max-range", type=positive_float, help="clip the range axis [m]")
+    p.add_argument("--dpi", type=positive_int, default=100, help="image resolution (default 100)")
     add_file_output_args(p)
+    add_quiet_arg(p)
     p.set_defaults(func=run)
 
 
@@ -54,5 +56,6 @@ def run(args: argparse.Namespace) -> int:
     fig.set_dpi(args.dpi)
     save_figure(fig, out, overwrite=args.overwrite)
     w, h = fig.canvas.get_width_height()
-    print(f"{out}: {args.view} of {seq.name} frame {args.frame} ({w}x{h} px)")
+    if not args.quiet:
+        print(f"{out}: {args.view} of {seq.name} frame {args.frame} ({w}x{h} px)")
     return 0

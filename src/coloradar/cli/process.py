@@ -10,8 +10,8 @@ import sys
 from ..batch.driver import DEFAULT_CHUNK_SIZE, process
 from ..batch.output_folder import PRODUCTS
 from ..dsp import ProcessingSettings
-from ..errors import ColoradarError
-from ._common import processing_setting
+from ..formats.source import check_input_path
+from ._common import UsageError, processing_setting
 
 
 def _frames(text: str) -> slice:
@@ -107,12 +107,13 @@ def run(args: argparse.Namespace) -> int:
     from ..batch.executors import make_executor
 
     if (args.scheduler or args.scheduler_file) and args.jobs is not None:
-        raise ColoradarError("--jobs sets the local pool; on a Dask cluster the workers "
-                             "(dask worker --nworkers/--nthreads) set the parallelism")
+        raise UsageError("--jobs sets the local pool; on a Dask cluster the workers "
+                         "(dask worker --nworkers/--nthreads) set the parallelism")
     try:
         settings = ProcessingSettings(**dict(args.settings)) if args.settings else None
     except ValueError as exc:
-        raise ColoradarError(f"--set: {exc}") from None
+        raise UsageError(f"--set: {exc}") from None
+    check_input_path(args.path, "a run folder, a run .zip or a dataset root folder")
     executor = None
     if args.scheduler or args.scheduler_file:
         executor = make_executor(scheduler=args.scheduler, scheduler_file=args.scheduler_file)
@@ -128,5 +129,8 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if executor is not None:
             executor.close()
-    print(report.summary())
+    # Failures are errors: on stderr, where a user who redirects the summary still sees them.
+    for line in report.summary().splitlines():
+        failed = line.startswith(("  failed:", "  … and")) or ": FAILED: " in line
+        print(line, file=sys.stderr if failed else sys.stdout)
     return 0 if report.ok else 1

@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..errors import ColoradarError, OutputExistsError
+from ..errors import OutputExistsError
 from ..progress import StageProgress
+from ._common import UsageError, positive_float
 
 __all__ = ["register", "run"]
 
@@ -26,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", default="corridor",
                    help=f"built-in scene ({', '.join(SCENES)}) or a scene .json file "
                         "(default: corridor)")
-    p.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
+    p.add_argument("--duration", type=positive_float, default=10.0, help="seconds (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0); also the run "
                    "number in the run's name")
     p.add_argument("--motion", choices=list(MOTION_PROFILES), default="smooth",
@@ -34,6 +35,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--speed", type=float, default=None, metavar="M_PER_S",
                    help="nominal rig speed in m/s (default: the scene's); above 1.76 m/s the "
                         "cascade's Doppler folds")
+    p.add_argument("--rest", type=float, default=0.0, metavar="S",
+                   help="the rig stands still for the first S seconds, then eases into its "
+                        "motion (default 0: it moves from the start)")
+    p.add_argument("--imu-noise", type=float, default=1.0, metavar="SCALE",
+                   help="scale of the IMU's errors (white noise, turn-on bias, bias random "
+                        "walk; 1 = the 3DM-GX5-25 datasheet, the default; 0 = an ideal IMU)")
+    p.add_argument("--radar-time-offset", type=float, default=0.0, metavar="S",
+                   help="radar clock lag t_d [s]: radar frames are stamped t - t_d "
+                        "(default 0); recorded in the truth")
     p.add_argument("--sensors", default=",".join(SENSOR_CHOICES),
                    help=f"comma-separated subset of {','.join(SENSOR_CHOICES)} (default: all)")
     p.add_argument("--vicon", action="store_true", help="also write vicon/ poses (100 Hz)")
@@ -55,6 +65,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..formats import atomic_write_text
+    from ..sim.imu import GX5_25
     from ..sim.run import SENSOR_CHOICES, resolve_scene, simulate_run
 
     if args.write_scene is not None:
@@ -65,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out is None:
             return 0
     if args.out is None:
-        raise ColoradarError("give an output folder OUT (or --write-scene FILE)")
+        raise UsageError("give an output folder OUT (or --write-scene FILE)")
     sensors: list[str] | None = [s.strip() for s in args.sensors.split(",") if s.strip()]
     if args.sensors == ",".join(SENSOR_CHOICES):
         sensors = None                  # the default: every sensor of the layout
@@ -74,7 +85,9 @@ def run(args: argparse.Namespace) -> int:
         res = simulate_run(args.out, scene=args.scene, duration=args.duration, seed=args.seed,
                            motion=args.motion, speed=args.speed, sensors=sensors, vicon=args.vicon,
                            heatmaps=False if args.no_heatmaps else None, name=args.name,
-                           overwrite=args.overwrite, progress=prog, layout=args.layout)
+                           overwrite=args.overwrite, progress=prog, layout=args.layout,
+                           imu=GX5_25.scaled(args.imu_noise), rest=args.rest,
+                           radar_time_offset=args.radar_time_offset)
     finally:
         prog.close()
     print(f"simulated {args.duration:g} s of scene {res.scene!r} in {res.seconds:.1f} s")

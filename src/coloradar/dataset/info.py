@@ -36,8 +36,9 @@ class StreamSummary:
         Inconsistencies found when reading (e.g. timestamp/frame count mismatch) or the error
         that prevented reading.
     errors
-        How many of ``issues`` are errors (an unreadable stream, a malformed frame file) rather
-        than inconsistencies the readers work around.
+        How many of ``issues`` are errors (an unreadable stream, a malformed frame file, a
+        timestamp that is not finite, duplicated or decreasing) rather than inconsistencies
+        the readers work around (``coloradar info`` exits 1 when a stream has any).
     """
 
     name: str
@@ -78,15 +79,18 @@ def summarize_sequence(seq: Sequence) -> list[StreamSummary]:
                 bad = []
                 if key in ("imu", "groundtruth", "vicon"):
                     obj = getattr(seq, key)
-                    ts, issues = obj.timestamps, obj.issues
+                    ts, issues, faults = obj.timestamps, obj.issues, obj.timestamp_faults
                 else:
                     sensor, product = key.split("/")
                     stream = getattr(getattr(seq, sensor), product)
                     ts, issues = stream.timestamps, stream.issues
+                    faults = stream.timestamp_faults
                     bad = stream.check_files()
             s = summarize_timestamps(key, ts)
             s.issues = list(issues) + bad
-            s.errors = len(bad)
+            s.errors = len(bad) + len(faults)
+            if s.non_monotonic and not faults:  # e.g. a reader that does not check
+                s.errors += 1
         except ColoradarError as exc:
             s = StreamSummary(key, issues=[f"unreadable: {exc}"], errors=1)
         out.append(s)
@@ -111,7 +115,7 @@ def format_sequence_summary(seq: Sequence, summaries: list[StreamSummary] | None
         dur = f"{s.duration:9.2f} s" if np.isfinite(s.duration) else f"{'-':>11}"
         rate = f"{s.rate:7.2f} Hz" if np.isfinite(s.rate) else f"{'-':>10}"
         lines.append(f"  {s.name:<24}{s.count:>8}{dur:>11}{rate:>10}  {_fmt_gaps(s)}")
-        if s.non_monotonic:
+        if s.non_monotonic and not any("timestamp" in m for m in s.issues):
             lines.append(f"    ! {s.non_monotonic} timestamps do not increase")
         lines.extend(f"    ! {msg}" for msg in s.issues)
     return "\n".join(lines)
@@ -127,4 +131,6 @@ def format_calibration_summary(seq_or_calib) -> str:
     shown = [t for t in sorted(calib.transforms)
              if layout.name == COLORADAR.name or t in layout.transforms]
     lines.append(f"  transforms: {', '.join(shown) or 'none'}")
+    if calib.presets:
+        lines.append(f"  ! built-in presets, not this calibration's own: {', '.join(calib.presets)}")
     return "\n".join(lines)

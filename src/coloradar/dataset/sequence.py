@@ -380,10 +380,13 @@ def resolve_calibration(calib: Calibration | str | os.PathLike[str] | None,
         return load_calibration(calib, layout=lay)
     found = _find_calib_near(run_path, lay) if run_path is not None else None
     if found is None:
-        warnings.warn(f"{run_path}: no calib/ or calib.zip found beside the run; using the built-in "
-                      "sensor presets (no coupling or phase/frequency calibration)",
-                      CalibrationWarning, stacklevel=3)
-        return load_calibration(None)
+        calib = load_calibration(None)
+        warnings.warn(f"{run_path}: no calib/ or calib.zip found beside the run; using the "
+                      "built-in sensor presets for every value: both radars' waveform, antenna "
+                      "and heatmap grid (no coupling or phase/frequency calibration) and the "
+                      f"extrinsics of {', '.join(calib.transforms)}", CalibrationWarning,
+                      stacklevel=3)
+        return calib
     return load_calibration(found, layout=lay)
 
 

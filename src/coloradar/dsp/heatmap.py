@@ -14,11 +14,18 @@ range bins (sized to stay in cache) the work is
    matrix times the ``(rows, doppler·azimuth)`` azimuth spectra;
 3. the power and the maximum over Doppler with its bin.
 
-Steps 2–3 run in one of two engines (``engine=``):
+The steps run in one of two engines (``engine=``):
 
 ``"numba"`` (used when :mod:`numba` is installed: ``pip install coloradar[accel]``)
-    one compiled loop computes each beam value, its power and the running Doppler maximum
-    in registers; the 8.4 M beam values are never written to memory.
+    one compiled pass per block of 16 range bins (:data:`~coloradar.dsp._kernels.LANES`),
+    the range bins as the SIMD lanes: per Doppler bin it gathers the elements (times
+    ``doppler_phase`` when given) into planar real/imaginary buffers, does step 1 with
+    its own Stockham radix-2 FFT (every butterfly one vector operation on 16 range bins, no
+    zero-padded copies or FFT calls) and steps 2–3 over the flattened (azimuth, range)
+    axis, computing each beam value, its power and the running Doppler maximum in
+    registers; the 8.4 M beam values are never written to memory, and the maximum carries
+    the range rate itself. Azimuth grids that are not a power of two take scipy's FFT per
+    chunk and a kernel for steps 2–3.
 ``"numpy"``
     scipy FFTs along azimuth and elevation of the rows the aperture spans (7 of 32 for the
     cascade), ``|·|`` with the Doppler bin packed into the low mantissa bits (4 for 16 bins,
@@ -35,6 +42,8 @@ explicit steering vectors for both radars and both signs.
 
 from __future__ import annotations
 
+import warnings
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -64,6 +73,12 @@ def _numba_kernel() -> Callable[..., None] | None:
         from ._kernels import peak_over_doppler
     except ImportError as exc:                      # numba is an optional extra
         _KERNEL_ERROR = str(exc)
+        return None
+    except Exception as exc:                        # a broken numba install: never crash
+        _KERNEL_ERROR = f"{type(exc).__name__}: {exc}"
+        warnings.warn(f"coloradar: numba is installed but its kernels failed to load "
+                      f"({_KERNEL_ERROR}); using the numpy heatmap engine", RuntimeWarning,
+                      stacklevel=2)
         return None
     _KERNEL = peak_over_doppler
     return _KERNEL
@@ -138,10 +153,35 @@ def _paired_steering(grid: AngleGrid) -> tuple[np.ndarray, np.ndarray, int, np.n
     return rows, steer, n_even, el_plus, el_minus
 
 
+class _Plan:
+    """What the numba engine needs of a grid, computed once per grid (see ``_plan``)."""
+
+    def __init__(self, grid: AngleGrid) -> None:
+        self.rows, self.steer, self.n_even, self.el_plus, self.el_minus = _paired_steering(grid)
+        self.row_of = np.argsort(self.rows)[np.searchsorted(np.sort(self.rows),
+                                                            grid.el_pos)].astype(np.int64)
+        self.az_pos = grid.az_pos.astype(np.int64)
+        self.az_read = grid.az_read.astype(np.int64)
+        n = grid.n_az
+        self.planar = n >= 2 and n & (n - 1) == 0      # the planar kernel's radix-2 FFT
+        w = np.exp(-2j * np.pi * np.arange(n // 2) / n).astype(np.complex64)
+        self.w_r, self.w_i = np.ascontiguousarray(w.real), np.ascontiguousarray(w.imag)
+
+
+_PLANS: weakref.WeakKeyDictionary[AngleGrid, _Plan] = weakref.WeakKeyDictionary()
+
+
+def _plan(grid: AngleGrid) -> _Plan:
+    plan = _PLANS.get(grid)
+    if plan is None:
+        plan = _PLANS[grid] = _Plan(grid)
+    return plan
+
+
 def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.ndarray,
                           workers: int = 1, chunk_size: int = CHUNK_SIZE,
-                          engine: str = "auto", channels: np.ndarray | None = None
-                          ) -> np.ndarray:
+                          engine: str = "auto", channels: np.ndarray | None = None,
+                          doppler_phase: np.ndarray | None = None) -> np.ndarray:
     """Heatmap from the per-element range–Doppler cube.
 
     Parameters
@@ -164,6 +204,10 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
         int ``(M,)`` or None. When given, ``elements`` is a ``(C, doppler, range)`` cube of
         channels and element ``m`` is ``elements[channels[m]]`` (saves copying the elements
         out of a range–Doppler cube).
+    doppler_phase
+        complex ``(C, doppler)`` or None: factors that multiply each channel (row of
+        ``elements``) per Doppler bin first, e.g. the TDM compensation (the numba engine
+        applies them while gathering, saving a pass over the cube).
 
     Returns
     -------
@@ -173,6 +217,10 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
         channel 1 the range rate of that peak [m/s].
     """
     engine = resolve_engine(engine)
+    plan = _plan(grid) if engine == "numba" else None
+    if doppler_phase is not None and (plan is None or not plan.planar):
+        elements = elements * np.asarray(doppler_phase, dtype=np.complex64)[:, :, None]
+        doppler_phase = None
     if channels is not None and engine == "numpy":
         elements, channels = elements[channels], None
     chan = (np.arange(elements.shape[0]) if channels is None
@@ -187,17 +235,23 @@ def heatmap_from_elements(elements: np.ndarray, grid: AngleGrid, velocities: np.
     scale = np.float32(1.0 / m**2)
     out = np.empty((n_el, grid.num_az, nr, 2), dtype=np.float32)
 
-    if engine == "numba":
+    if plan is not None:
         kernel = _numba_kernel()
         assert kernel is not None
         from ._kernels import gather_rows
-        rows, steer, n_even, el_plus, el_minus = _paired_steering(grid)
-        row_of = np.argsort(rows)[np.searchsorted(np.sort(rows), grid.el_pos)]
+        steer, n_even, el_plus, el_minus = plan.steer, plan.n_even, plan.el_plus, plan.el_minus
+        row_of, az_pos, az_read = plan.row_of, plan.az_pos, plan.az_read
+        if plan.planar:
+            from ._kernels import peak_over_doppler_planar
+            gain = np.full((elements.shape[0], nd), 1.0 / m, dtype=np.complex64)
+            if doppler_phase is not None:
+                gain *= np.asarray(doppler_phase, dtype=np.complex64)
+            peak_over_doppler_planar(np.ascontiguousarray(elements, dtype=np.complex64), gain,
+                                     chan, row_of, az_pos, steer, n_even, el_plus,
+                                     el_minus, az_read, vel, out, plan.w_r, plan.w_i)
+            return out
         rc = max(1, min(nr, chunk_size // (n_rows * nd * n_az)))
         buf = np.zeros((n_rows, rc, nd, width), dtype=np.complex64)
-        az_read = grid.az_read.astype(np.int64)
-        az_pos = grid.az_pos.astype(np.int64)
-        row_of = row_of.astype(np.int64)
         elements = np.ascontiguousarray(elements, dtype=np.complex64)
         for r0 in range(0, nr, rc):
             n = min(nr, r0 + rc) - r0

@@ -7,6 +7,7 @@ root (``"cascade/adc_samples/timestamps.txt"``), whatever the zip's own top fold
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 import threading
@@ -16,8 +17,8 @@ from pathlib import Path, PurePosixPath
 
 from ..errors import FormatError, MissingDataError, ReadError
 
-__all__ = ["FolderSource", "Source", "ZipSource", "check_regular_file", "open_source",
-           "read_file_bytes", "read_file_text"]
+__all__ = ["FolderSource", "Source", "ZipSource", "check_input_path", "check_regular_file",
+           "open_source", "read_file_bytes", "read_file_text"]
 
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
           (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a character device"),
@@ -302,6 +303,56 @@ class ZipSource(Source):
         return f"ZipSource({self.location!r})"
 
 
+def check_input_path(path: str | os.PathLike[str],
+                     expected: str = "a folder or a zip archive") -> None:
+    """Check that ``path`` is a folder or a readable zip archive, with an error that says what
+    it really is otherwise.
+
+    Raises
+    ------
+    MissingDataError
+        Nothing there; or a symbolic link that leads nowhere (a loop, or a missing target),
+        said as such.
+    ReadError
+        Something that is neither a folder nor a regular file (a FIFO, a socket, a device), or
+        that cannot be examined.
+    FormatError
+        A regular file that is not a zip archive; a zip archive cut short (a copy or a download
+        that did not finish) is said to be one.
+    """
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        if p.is_symlink():
+            raise MissingDataError(f"{p}: a symbolic link to {os.readlink(p)}, which does not "
+                                   f"exist; expected {expected}") from None
+        raise MissingDataError(f"{p}: no such folder or zip file") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise MissingDataError(f"{p}: a loop of symbolic links (it never reaches a file or "
+                                   f"folder); expected {expected}") from None
+        raise ReadError(f"{p}: cannot be examined ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(st.st_mode):
+        return
+    if not stat.S_ISREG(st.st_mode):
+        kind = next((what for test, what in _KINDS if test(st.st_mode)), "not a regular file")
+        raise ReadError(f"{p}: {kind}; expected {expected}")
+    if zipfile.is_zipfile(p):
+        return
+    try:
+        with open(p, "rb") as f:
+            head = f.read(4)
+    except OSError as exc:
+        raise ReadError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    if head == b"PK\x03\x04":
+        raise FormatError(f"{p}: a zip archive cut short or damaged ({st.st_size:,} bytes, no "
+                          "table of contents at its end; a copy or download that did not "
+                          "finish?); copy it again")
+    what = "an empty file" if st.st_size == 0 else f"a file of {st.st_size:,} bytes"
+    raise FormatError(f"{p}: {what} that is not a zip archive; expected {expected}")
+
+
 def open_source(path: str | os.PathLike[str], markers: Iterable[str] = ()) -> Source:
     """Open a folder or a zip as a :class:`Source`.
 
@@ -318,11 +369,7 @@ def open_source(path: str | os.PathLike[str], markers: Iterable[str] = ()) -> So
     p = Path(path)
     if p.is_dir():
         return FolderSource(p)
-    if not p.exists():
-        raise MissingDataError(f"{p}: no such folder or zip file")
-    check_regular_file(p)  # zipfile would block on a FIFO
-    if not zipfile.is_zipfile(p):
-        raise FormatError(f"{p}: expected a folder or a zip archive")
+    check_input_path(p)  # zipfile would block on a FIFO
     src = ZipSource(p)
     markers = tuple(markers)
     top = src.listdir("")

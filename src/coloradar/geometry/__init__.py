@@ -27,6 +27,7 @@ from .frames import (
 from .mapping import (
     MAP_SOURCES,
     PointMap,
+    VoxelAccumulator,
     accumulate_clouds,
     build_map,
     voxel_downsample,
@@ -43,6 +44,7 @@ __all__ = [
     "PointMap",
     "RigVelocity",
     "Trajectory",
+    "VoxelAccumulator",
     "accumulate_clouds",
     "associate",
     "build_map",

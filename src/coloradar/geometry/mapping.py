@@ -14,7 +14,7 @@ from .se3 import SE3
 from .timesync import window_indices
 from .trajectory import Trajectory, trajectory_from_groundtruth
 
-__all__ = ["MAP_SOURCES", "PointMap", "accumulate_clouds", "build_map",
+__all__ = ["MAP_SOURCES", "PointMap", "VoxelAccumulator", "accumulate_clouds", "build_map",
            "voxel_downsample"]
 
 MAP_SOURCES = {s.sensor: s.name for lay in LAYOUTS.values() for s in lay.frames.values()
@@ -72,6 +72,77 @@ def voxel_downsample(points: np.ndarray, voxel_size: float,
     return out
 
 
+_KEY_BITS = 21                    # per axis: ±2^20 voxels (±10 km at 1 cm) in one int64
+_KEY_OFFSET = 1 << (_KEY_BITS - 1)
+
+
+class VoxelAccumulator:
+    """A voxel map built one cloud at a time, holding only the occupied voxels.
+
+    Each added cloud is reduced to its per-voxel centroids (:func:`voxel_downsample`), which
+    are summed into the map's voxels; :meth:`points` is, per voxel, the mean of the centroids
+    of the clouds that saw it (every cloud counting once, however many of its points fell in
+    the voxel). Memory is that of the occupied voxels (``C + 1`` float64 and one int64 key
+    each), whatever the number of clouds: a map of a long run costs what its extent costs.
+
+    Parameters
+    ----------
+    voxel_size
+        Edge of a cubic voxel [m]; voxel ``k`` covers ``[k·size, (k+1)·size)`` on each axis.
+    """
+
+    def __init__(self, voxel_size: float):
+        if not voxel_size > 0:
+            raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
+        self.voxel_size = float(voxel_size)
+        self._keys = np.zeros(0, dtype=np.int64)        # sorted, one per occupied voxel
+        self._sums: np.ndarray | None = None            # float64 (M, C)
+        self._counts = np.zeros(0, dtype=np.int64)
+        self._dtype: np.dtype = np.dtype(np.float32)
+
+    def __len__(self) -> int:
+        return int(self._keys.size)
+
+    def _key(self, xyz: np.ndarray) -> np.ndarray:
+        v = np.floor(xyz.astype(np.float64) / self.voxel_size).astype(np.int64) + _KEY_OFFSET
+        if v.size and (v.min() < 0 or v.max() >= 1 << _KEY_BITS):
+            raise SettingsError(f"a point lies more than {_KEY_OFFSET:,} voxels "
+                                f"({_KEY_OFFSET * self.voxel_size:g} m) from the origin; use a "
+                                "larger voxel size")
+        return (v[:, 0] << (2 * _KEY_BITS)) | (v[:, 1] << _KEY_BITS) | v[:, 2]
+
+    def add(self, points: np.ndarray) -> None:
+        """Add one cloud, float ``(N, C)`` x y z first [m] (non-finite points are dropped)."""
+        cen = voxel_downsample(np.asarray(points), self.voxel_size)
+        if cen.shape[0] == 0:
+            return
+        if self._sums is None:
+            self._sums = np.zeros((0, cen.shape[1]))
+            self._dtype = cen.dtype
+        elif cen.shape[1] != self._sums.shape[1]:
+            raise SettingsError(f"a cloud of {cen.shape[1]} columns added to a map of "
+                                f"{self._sums.shape[1]}")
+        keys = self._key(cen[:, :3])  # one per voxel of this cloud: unique already
+        pos = np.searchsorted(self._keys, keys)
+        hit = pos < self._keys.size
+        hit[hit] = self._keys[pos[hit]] == keys[hit]
+        self._sums[pos[hit]] += cen[hit]
+        self._counts[pos[hit]] += 1
+        new = ~hit
+        if new.any():
+            # Insert the new voxels in key order: one merge, O(M) per cloud.
+            self._keys = np.insert(self._keys, pos[new], keys[new])
+            self._sums = np.insert(self._sums, pos[new], cen[new].astype(np.float64), axis=0)
+            self._counts = np.insert(self._counts, pos[new], 1)
+
+    def points(self) -> np.ndarray:
+        """``(M, C)`` one point per occupied voxel (the mean of its clouds' centroids), in
+        the dtype of the clouds added, ordered by voxel (x, then y, then z)."""
+        if self._sums is None:
+            return np.zeros((0, 3), dtype=np.float32)
+        return (self._sums / self._counts[:, None]).astype(self._dtype)
+
+
 def accumulate_clouds(clouds: Iterable[np.ndarray | None], poses: Iterable[SE3],
                       voxel_size: float | None = None, max_range: float | None = None,
                       min_range: float = 0.0) -> np.ndarray:
@@ -84,9 +155,10 @@ def accumulate_clouds(clouds: Iterable[np.ndarray | None], poses: Iterable[SE3],
     poses
         ``world_T_sensor`` of each cloud.
     voxel_size
-        Down-sample with :func:`voxel_downsample`: each cloud before stacking (which bounds
-        memory on long windows), then the stack; a voxel's point is thus the mean of the
-        per-frame centroids, every frame that saw the voxel counting once.
+        Down-sample into a :class:`VoxelAccumulator`, one cloud at a time, so that memory is
+        that of the occupied voxels however long the window: a voxel's point is the mean of
+        the per-frame centroids, every frame that saw the voxel counting once. None: every
+        point is kept.
     max_range, min_range
         Keep points whose distance from the sensor is in ``[min_range, max_range]`` [m] (lidars
         see the rig itself; radars are noisy far out).
@@ -96,6 +168,7 @@ def accumulate_clouds(clouds: Iterable[np.ndarray | None], poses: Iterable[SE3],
     numpy.ndarray
         float32 ``(M, C)``, world frame.
     """
+    acc = VoxelAccumulator(voxel_size) if voxel_size else None
     parts = []
     for cloud, pose in zip(clouds, poses, strict=True):
         if cloud is None:  # a frame that could not be read (reported where it was read)
@@ -106,11 +179,15 @@ def accumulate_clouds(clouds: Iterable[np.ndarray | None], poses: Iterable[SE3],
         if max_range is not None:
             keep &= r <= max_range
         w = pose.apply_to_cloud(c[keep])
-        parts.append(voxel_downsample(w, voxel_size) if voxel_size else w)
+        if acc is not None:
+            acc.add(w)
+        else:
+            parts.append(w)
+    if acc is not None:
+        return acc.points()
     if not parts:
         return np.zeros((0, 3), dtype=np.float32)
-    out = np.concatenate(parts, axis=0)
-    return voxel_downsample(out, voxel_size) if voxel_size else out
+    return np.concatenate(parts, axis=0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,6 +206,9 @@ class PointMap:
         int64: the stream indices used.
     timestamps
         float64: their timestamps [s].
+    points_from
+        The stream the points came from: ``"pointclouds"`` (the sensor's own, or those
+        ``coloradar process`` wrote) or ``"adc"`` (computed from the raw ADC frames).
     """
 
     points: np.ndarray
@@ -136,12 +216,14 @@ class PointMap:
     sensor: str
     frame_indices: np.ndarray
     timestamps: np.ndarray
+    points_from: str = "pointclouds"
 
 
 def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float | None = None,
               voxel_size: float | None = None, stride: int = 1, max_range: float | None = None,
               min_range: float = 0.0, trajectory: Trajectory | None = None,
-              progress: Callable[[int, int], None] | None = None) -> PointMap:
+              progress: Callable[[int, int], None] | None = None,
+              processing: dict | None = None) -> PointMap:
     """Accumulate a run's point clouds into a world-frame map.
 
     Parameters
@@ -149,8 +231,10 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
     seq
         A sequence (:func:`coloradar.open_sequence`).
     sensor
-        ``"lidar"``, ``"single_chip"`` (the dataset's radar point clouds) or ``"cascade"``
-        when the sequence provides cascade point clouds.
+        ``"lidar"``, ``"single_chip"`` or ``"cascade"``. A radar's points are its point-cloud
+        stream when the sequence has one (the single chip's own, or those of
+        ``open_sequence(run, products=OUT)``), else computed from its ADC frames with
+        :class:`coloradar.dsp.RadarProcessor` (as ``coloradar odometry`` and ``export`` do).
     start, duration
         Window in seconds from the start of the ground truth; None duration = to the end.
         Frames outside the ground truth's span are left out.
@@ -164,17 +248,32 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
         ``world_T_base(t)``; default: the run's ground truth.
     progress
         Called as ``progress(done, total)`` after each frame.
+    processing
+        Keyword arguments of :class:`coloradar.dsp.RadarProcessor` when the points are
+        computed from ADC frames.
     """
     if sensor not in MAP_SOURCES:
         raise MissingDataError(f"no point clouds for {sensor!r}; expected one of "
                                f"{', '.join(MAP_SOURCES)}")
     name = MAP_SOURCES[sensor]
-    if name not in seq.available():
+    have = seq.available()
+    convert: Callable[[np.ndarray], np.ndarray] | None = None
+    points_from = "pointclouds"
+    if name not in have and sensor != "lidar" and f"{sensor}/adc" in have:
+        from ..dsp import RadarProcessor  # only for a radar without point clouds
+
+        proc = RadarProcessor(seq.calib.radar(sensor), **dict(processing or {}))
+        convert, name, points_from = proc.pointcloud, f"{sensor}/adc", "adc"
+    if name not in have:
         hint = (" (radar point clouds that coloradar process wrote are read with "
                 "open_sequence(run, products=OUT), --products OUT)"
                 if sensor != "lidar" else "")
-        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {name} stream in this run "
-                               f"(present: {', '.join(seq.available()) or 'nothing'}){hint}")
+        raise MissingDataError(f"{getattr(seq, 'name', 'run')}: no {name} stream and no "
+                               f"{sensor}/adc in this run "
+                               f"(present: {', '.join(have) or 'nothing'}){hint}"
+                               if sensor != "lidar" else
+                               f"{getattr(seq, 'name', 'run')}: no {name} stream in this run "
+                               f"(present: {', '.join(have) or 'nothing'})")
     stream = seq.stream(name)
     traj = trajectory if trajectory is not None else trajectory_from_groundtruth(seq)
     t0 = traj.start + start
@@ -197,11 +296,12 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
             # A bad frame is reported (DataWarning) and left out, like `coloradar process` does.
             cloud = stream.read_or_skip(int(i))
             used[k] = cloud is not None
-            yield cloud
+            yield cloud if cloud is None or convert is None else convert(cloud)
             if progress is not None:
                 progress(k + 1, idx.size)
 
     pts = accumulate_clouds(clouds(), world, voxel_size, max_range, min_range)
     from .cloud_io import default_fields
 
-    return PointMap(pts, default_fields(pts.shape[1]), sensor, idx[used], ts[idx[used]])
+    return PointMap(pts, default_fields(pts.shape[1]), sensor, idx[used], ts[idx[used]],
+                    points_from)

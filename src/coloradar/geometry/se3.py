@@ -80,7 +80,7 @@ class SE3:
             raise SettingsError("SE3.rotation must be a single scipy Rotation")
         t = np.array(self.translation, dtype=np.float64).reshape(-1)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
-            raise SettingsError(f"SE3.translation must be 3 finite numbers, got {t!r}")
+            raise SettingsError(f"SE3.translation must be 3 finite numbers, got {t.tolist()}")
         object.__setattr__(self, "translation", readonly(t))
 
     # -- construction -------------------------------------------------------------------------

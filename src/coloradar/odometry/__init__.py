@@ -2,8 +2,10 @@
 
 - :func:`estimate_ego_velocity`: the sensor's 3D velocity from one point cloud's range rates
   (RANSAC + least squares, with covariance), robust to moving objects and false alarms.
-- :func:`radar_inertial_odometry`: ego-velocities integrated with gyro (or ground-truth)
-  attitude into the rig's trajectory.
+- :func:`rio_odometry`: the radar-inertial error-state EKF (IMU propagation, radar velocity
+  updates, automatic zero-velocity updates, online biases, time offset and extrinsic rotation).
+- :func:`radar_inertial_odometry`: the dead-reckoning baseline, ego-velocities integrated with
+  gyro (or ground-truth) attitude into the rig's trajectory.
 - :func:`run_odometry`, :func:`evaluate_odometry`: the ``coloradar odometry`` and
   ``coloradar evaluate`` commands as functions; :func:`ego_velocity_report` for summaries.
 - :func:`absolute_trajectory_error`, :func:`relative_pose_error`, :func:`velocity_errors`,
@@ -53,6 +55,7 @@ from .metrics import (
     velocity_errors,
 )
 from .pipeline import (
+    ESTIMATORS,
     SOURCES,
     OdometryOutput,
     default_source,
@@ -61,6 +64,7 @@ from .pipeline import (
     run_odometry,
 )
 from .report import ego_velocity_report
+from .rio import RioConfig, RioResult, rio_odometry, rio_summary
 from .tum import format_tum, parse_tum, read_tum, write_tum
 from .velocity_track import (
     EgoVelocityTrack,
@@ -72,6 +76,7 @@ from .velocity_track import (
 )
 
 __all__ = [
+    "ESTIMATORS",
     "EVALUATION_FILES",
     "ORIENTATION_SOURCES",
     "RPE_PAIRINGS",
@@ -85,6 +90,8 @@ __all__ = [
     "OdometryOutput",
     "RPEPairing",
     "RPEResult",
+    "RioConfig",
+    "RioResult",
     "VelocityErrors",
     "absolute_trajectory_error",
     "apply_alignment",
@@ -111,6 +118,8 @@ __all__ = [
     "read_tum",
     "read_velocity_table",
     "relative_pose_error",
+    "rio_odometry",
+    "rio_summary",
     "rpe_pairs",
     "run_ego_velocity",
     "run_odometry",

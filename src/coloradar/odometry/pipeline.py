@@ -8,8 +8,11 @@ Point clouds come from one of three sources of a run, turned into points by
 - ``heatmaps``: heatmaps (shipped or computed) through :func:`coloradar.dsp.heatmap_pointcloud`
   with the calibration's heatmap grid.
 
-The output folder holds ``ego_velocity.csv`` (:mod:`.velocity_track`), ``trajectory.txt``
-(TUM, ``world_T_base``) and ``odometry.json`` (what was run, on which run, with which settings),
+The trajectory comes from the radar-inertial EKF (:mod:`.rio`, the default) or from the
+dead-reckoning baseline (:mod:`.dead_reckoning`). The output folder holds
+``ego_velocity.csv`` (:mod:`.velocity_track`), ``trajectory.txt`` (TUM, ``world_T_base``) and
+``odometry.json`` (what was run, on which run, with which settings; for the filter also its
+biases, time offsets and per-pose covariance, :func:`~coloradar.odometry.rio.rio_summary`),
 which :func:`~coloradar.odometry.evaluation.evaluate_odometry` reads.
 """
 
@@ -17,7 +20,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -26,15 +29,24 @@ import numpy as np
 from .. import __version__
 from ..calib import RadarCalib
 from ..dsp.points import POINT_SOURCES, default_point_source, radar_point_stream
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..errors import (
+    ColoradarError,
+    MissingDataError,
+    OutputExistsError,
+    SettingsError,
+    WriteError,
+)
 from ..formats.atomic import atomic_write_text, make_output_dir
 from ..geometry import Trajectory, trajectory_from_groundtruth, window_indices
 from .dead_reckoning import ORIENTATION_SOURCES, estimate_gyro_bias, radar_inertial_odometry
 from .ego_velocity import EgoVelocityConfig, static_inlier_threshold
+from .rio import RioConfig, rio_odometry, rio_summary
 from .tum import write_tum
 from .velocity_track import EgoVelocityTrack, estimate_ego_velocities, write_velocity_table
+from .zero_velocity import ZeroVelocityConfig, still_world
 
 __all__ = [
+    "ESTIMATORS",
     "INFO_FILE",
     "SOURCES",
     "TRAJECTORY_FILE",
@@ -52,6 +64,9 @@ SOURCES = POINT_SOURCES
 VELOCITY_FILE = "ego_velocity.csv"
 TRAJECTORY_FILE = "trajectory.txt"
 INFO_FILE = "odometry.json"
+
+ESTIMATORS = ("rio", "dead-reckoning")
+"""Estimators of :func:`run_odometry`: the radar-inertial EKF (default) and the baseline."""
 
 Progress = Callable[[int, int], None]
 
@@ -133,6 +148,18 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
     -------
     EgoVelocityTrack
     """
+    return _ego_velocity(seq, radar, source, config=config, processing=processing, start=start,
+                         duration=duration, stride=stride, max_frames=max_frames, seed=seed,
+                         progress=progress)[0]
+
+
+def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityConfig | None,
+                  processing: dict | None, start: float | None, duration: float | None,
+                  stride: int, max_frames: int | None, seed: int, progress: Progress | None,
+                  still_config: ZeroVelocityConfig | None = None
+                  ) -> tuple[EgoVelocityTrack, np.ndarray]:
+    """:func:`run_ego_velocity`, and per frame whether the radar sees a still world
+    (:func:`~coloradar.odometry.zero_velocity.still_world`, computed on the same clouds)."""
     source = source or default_source(seq, radar)
     if source not in SOURCES:
         raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
@@ -143,6 +170,8 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
     cfg = config or ego_velocity_config(seq.calib.radar(radar))
 
     skipped: dict[int, str] = {}
+    still = np.zeros(idx.size, dtype=bool)
+    zv = still_config or ZeroVelocityConfig()
 
     def clouds() -> Iterator[np.ndarray]:
         for j, k in enumerate(idx):
@@ -153,13 +182,15 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
                 skipped[j] = f"unreadable frame: {stream.path(int(k))}"
                 yield np.zeros((0, 5), dtype=np.float32)
             else:
-                yield convert(frame)
+                cloud = convert(frame)
+                still[j] = still_world(cloud, zv, cfg.min_range)
+                yield cloud
 
     track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
                                     frame=radar, progress=progress)
     for j, why in skipped.items():
         track.reasons[j] = why
-    return track
+    return track, still
 
 
 def run_path(seq) -> str:
@@ -191,13 +222,25 @@ class OdometryOutput:
     files: list[Path]
 
 
+def _check_output_folder(folder: Path) -> None:
+    """Refuse an output folder that is, or lies under, a file before any work is done."""
+    for q in (folder, *folder.parents):
+        if q.exists():
+            if not q.is_dir():
+                raise WriteError(f"{q}: expected an output folder, found a file" if q == folder
+                                 else f"{folder}: cannot be created, {q} is a file")
+            return
+
+
 def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
                  source: str | None = None, orientation: str = "imu",
                  config: EgoVelocityConfig | None = None, processing: dict | None = None,
                  start: float | None = None, duration: float | None = None, stride: int = 1,
                  seed: int = 0, gyro_bias_window: float | None = None,
-                 overwrite: bool = False, progress: Progress | None = None) -> OdometryOutput:
-    """Ego-velocity and radar–inertial dead reckoning for a run, written to ``out``.
+                 overwrite: bool = False, progress: Progress | None = None,
+                 estimator: str = "rio", rio_config: RioConfig | None = None,
+                 fuse: Sequence[str] | str = "auto") -> OdometryOutput:
+    """Ego-velocity and radar-inertial odometry for a run, written to ``out``.
 
     Parameters
     ----------
@@ -205,16 +248,30 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
         The run.
     out
         Output folder (created); gets ``ego_velocity.csv``, ``trajectory.txt`` (TUM),
-        ``odometry.json``.
+        ``odometry.json`` (and ``ego_velocity_<radar>.csv`` for each radar in ``fuse``).
     radar, source, config, processing, start, duration, stride, seed, progress
         See :func:`run_ego_velocity`.
+    estimator
+        ``"rio"`` (default): the error-state EKF of :mod:`.rio` (IMU propagation, radar
+        velocity updates, automatic zero-velocity updates, online biases and time offset);
+        ``"dead-reckoning"``: the baseline of :mod:`.dead_reckoning` (ego-velocities
+        integrated with the gyro or ground-truth attitude).
     orientation
-        ``"imu"`` (gyro attitude) or ``"groundtruth"`` (upper bound).
+        Dead reckoning only: ``"imu"`` (gyro attitude) or ``"groundtruth"`` (upper bound).
     gyro_bias_window
-        Seconds at the start of the IMU stream during which the rig is at rest; their mean
-        angular rate is subtracted as gyro bias. None: no bias correction.
+        Dead reckoning only: seconds at the start of the IMU stream during which the rig is at
+        rest; their mean angular rate is subtracted as gyro bias. None: no bias correction.
+        (The filter finds rest by itself.)
     overwrite
         Replace existing output files.
+    rio_config
+        Filter settings (:class:`~coloradar.odometry.rio.RioConfig`).
+    fuse
+        Further radars whose ego-velocities also update the filter (``"rio"`` only), e.g.
+        ``("single_chip",)`` beside the cascade, each with its default source and settings;
+        ``"auto"`` (default): the other radar when the run has data of it (the filter fuses
+        both radars), none for dead reckoning; ``()``: the one radar only. ``processing``
+        applies to ``radar`` only; fused radars use their default processing.
 
     Returns
     -------
@@ -222,11 +279,35 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
         The initial pose is the ground truth's at the first frame when the run has ground
         truth (so that the trajectories are comparable without alignment), else the identity.
     """
+    if estimator not in ESTIMATORS:
+        raise SettingsError(f"unknown estimator {estimator!r}; expected one of "
+                            f"{', '.join(ESTIMATORS)}")
     if orientation not in ORIENTATION_SOURCES:
         raise ColoradarError(f"unknown orientation source {orientation!r}; expected one of "
                              f"{', '.join(ORIENTATION_SOURCES)}")
+    if isinstance(fuse, str):
+        if fuse != "auto":
+            raise SettingsError(f"fuse must be 'auto' or a list of radars, got {fuse!r}")
+        fuse = tuple(r for r in ("cascade", "single_chip") if r != radar
+                     and default_point_source(seq, r) is not None) if estimator == "rio" else ()
+    fuse = tuple(fuse)
+    if estimator == "rio":
+        if orientation != "imu":
+            raise SettingsError("orientation='groundtruth' is a setting of the dead-reckoning "
+                                "baseline (--estimator dead-reckoning); the filter estimates "
+                                "its attitude from the IMU")
+        if gyro_bias_window:
+            raise SettingsError("gyro_bias_window (--gyro-bias-window) is a setting of the "
+                                "dead-reckoning baseline; the filter finds rest by itself")
+        bad = [r for r in fuse if r == radar or r not in ("cascade", "single_chip")]
+        if bad:
+            raise SettingsError(f"fuse: {', '.join(bad)} is not a radar other than {radar}")
+    elif fuse:
+        raise SettingsError("fuse (--fuse) needs the filter (estimator 'rio')")
     folder = Path(out)
-    targets = [folder / n for n in (VELOCITY_FILE, TRAJECTORY_FILE, INFO_FILE)]
+    _check_output_folder(folder)
+    names = [VELOCITY_FILE, TRAJECTORY_FILE, INFO_FILE] + [f"ego_velocity_{r}.csv" for r in fuse]
+    targets = [folder / n for n in names]
     existing = [p.name for p in targets if p.exists()]
     if existing and not overwrite:
         raise OutputExistsError(f"{folder}: holds {', '.join(existing)} already; pass "
@@ -238,24 +319,27 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     imu_t = imu_w = bias = None
     if orientation == "imu":
         if "imu" not in seq.available():
-            raise MissingDataError(f"{seq.location}: the run has no IMU; use orientation "
-                                   "'groundtruth' (--orientation groundtruth)")
+            hint = ("the filter needs it; --estimator dead-reckoning --orientation groundtruth "
+                    "works without" if estimator == "rio" else
+                    "use orientation 'groundtruth' (--orientation groundtruth)")
+            raise MissingDataError(f"{seq.location}: the run has no IMU; {hint}")
         imu_t, imu_w = seq.imu.timestamps, seq.imu.angular_rates
         if gyro_bias_window:
             bias = estimate_gyro_bias(imu_t, imu_w, imu_t[0], imu_t[0] + gyro_bias_window)
     source = source or default_source(seq, radar)
     cfg = config or ego_velocity_config(seq.calib.radar(radar))
-    track = run_ego_velocity(seq, radar, source, config=cfg, processing=processing, start=start,
-                             duration=duration, stride=stride, seed=seed, progress=progress)
-    traj = radar_inertial_odometry(track, seq.calib, orientation=orientation,
-                                   imu_timestamps=imu_t, imu_rates=imu_w, groundtruth=gt,
-                                   gyro_bias=bias, radar=radar)
-    info = {
+    rcfg = rio_config or RioConfig()
+    track, still = _ego_velocity(seq, radar, source, config=cfg, processing=processing,
+                                 start=start, duration=duration, stride=stride,
+                                 max_frames=None, seed=seed, progress=progress,
+                                 still_config=rcfg.zero_velocity)
+    info: dict = {
         "run": run_path(seq),
         "run_name": seq.name,
         "calib": str(getattr(seq.calib, "source", "preset")),
         "radar": radar,
         "source": source,
+        "estimator": estimator,
         "orientation": orientation,
         "frames": len(track),
         "frames_ok": int(track.ok.sum()),
@@ -266,10 +350,35 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
         "processing": processing or {},
         "coloradar_version": __version__,
     }
+    extra: list[EgoVelocityTrack] = []
+    if estimator == "rio":
+        tracks, stills = [track], [still]
+        for r in fuse:
+            tr_r, st_r = _ego_velocity(seq, r, None, config=None, processing=None,
+                                       start=start, duration=duration, stride=stride,
+                                       max_frames=None, seed=seed, progress=None,
+                                       still_config=rcfg.zero_velocity)
+            tracks.append(tr_r)
+            stills.append(st_r)
+            extra.append(tr_r)
+        res = rio_odometry(tracks, seq.calib, seq.imu.timestamps, seq.imu.data,
+                           radars=(radar, *fuse), config=rcfg, groundtruth=gt, still=stills)
+        traj = res.trajectory
+        info["fuse"] = list(fuse)
+        info["rio"] = rio_summary(res, rcfg)
+        what = "radar-inertial EKF (IMU propagation, radar velocity updates)"
+    else:
+        traj = radar_inertial_odometry(track, seq.calib, orientation=orientation,
+                                       imu_timestamps=imu_t, imu_rates=imu_w, groundtruth=gt,
+                                       gyro_bias=bias, radar=radar)
+        what = f"radar ego-velocity + {orientation} attitude (dead reckoning)"
     comments = [f"run {seq.name}, {radar} radar, source {source}"]
     make_output_dir(folder)
     write_velocity_table(targets[0], track, comments=comments, overwrite=overwrite)
+    for r, tr_r, path in zip(fuse, extra, targets[3:], strict=True):
+        write_velocity_table(path, tr_r, comments=[f"run {seq.name}, {r} radar (fused)"],
+                             overwrite=overwrite)
     write_tum(targets[1], traj, overwrite=overwrite, comments=[
-        *comments, f"world_T_base from radar ego-velocity + {orientation} attitude"])
+        *comments, f"world_T_base from {what}"])
     atomic_write_text(targets[2], json.dumps(info, indent=2) + "\n")
     return OdometryOutput(folder, track, traj, targets)

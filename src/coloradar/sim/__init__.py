@@ -9,7 +9,7 @@ Quick start::
 See ``docs/simulator.md`` for the models, the scene file format and the truth file.
 """
 
-from .imu import GRAVITY, ImuModel, simulate_imu
+from .imu import GRAVITY, GX5_25, ImuModel, simulate_imu
 from .lidar import LidarModel, column_times, simulate_scan
 from .paths import EllipsePath, LinePath, Sinusoids, path_from_dict
 from .radar import (
@@ -24,6 +24,7 @@ from .radar import (
     visible_targets,
 )
 from .radar_if import apply_channel_errors, slow_times, synthesize_adc
+from .rest import RestStart
 from .run import (
     RATES,
     SENSOR_CHOICES,
@@ -42,6 +43,7 @@ from .truth import SimTruth, load_truth, match_detections
 
 __all__ = [
     "GRAVITY",
+    "GX5_25",
     "MOTION_PROFILES",
     "RADAR_MODELS",
     "RATES",
@@ -57,6 +59,7 @@ __all__ = [
     "RadarTargets",
     "Rect",
     "Reflector",
+    "RestStart",
     "RigState",
     "RigTrajectory",
     "Scatterers",

@@ -37,7 +37,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -73,7 +73,7 @@ from ..formats import (
 from ..formats.atomic import atomic_write_bytes
 from ..formats.layout import COLORADAR, RunLayout, get_layout
 from ..formats.source import read_file_text
-from .imu import ImuModel, simulate_imu
+from .imu import GX5_25, ImuModel, simulate_imu
 from .lidar import LidarModel, simulate_scan
 from .radar import (
     RADAR_MODELS,
@@ -83,6 +83,7 @@ from .radar import (
     radar_frame,
     visible_targets,
 )
+from .rest import RestStart
 from .scene import Scatterers, Scene, load_scene
 from .scenes import SCENES, builtin_scene
 from .trajectory import MOTION_PROFILES, RigTrajectory, make_trajectory
@@ -299,8 +300,10 @@ class _Context:
     def __init__(self, scene: Scene, traj: RigTrajectory, calib: Calibration,
                  coupling_adc: dict[str, np.ndarray], seed: int, start_time: float,
                  root: Path, progress: Progress | None, heatmaps: bool,
-                 layout: RunLayout = COLORADAR):
+                 layout: RunLayout = COLORADAR, imu_model: ImuModel = GX5_25,
+                 radar_time_offset: float = 0.0):
         self.scene, self.traj, self.calib = scene, traj, calib
+        self.imu_model, self.radar_time_offset = imu_model, radar_time_offset
         self.coupling_adc, self.seed, self.start_time = coupling_adc, seed, start_time
         self.root, self.heatmaps, self.layout = root, heatmaps, layout
         self._progress = progress
@@ -364,7 +367,8 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
         acc["amplitude"].append(targets.received_amplitude.astype(np.float32))
         offsets.append(offsets[-1] + len(targets))
         ctx.report(radar, i + 1, n)
-    stamps = ctx.start_time + times
+    # A radar clock that lags: the frame simulated at true time t is stamped t − t_d.
+    stamps = ctx.start_time + times - ctx.radar_time_offset
     write_timestamps(ctx.root / streams["adc"].timestamps_path, stamps)
     if proc is not None:
         write_timestamps(ctx.root / streams["heatmaps"].timestamps_path, stamps)
@@ -395,6 +399,13 @@ def _lidar_task(ctx: _Context, times: np.ndarray) -> dict[str, np.ndarray]:
     return {"lidar/timestamps": ctx.start_time + times}
 
 
+def _trajectory(scene: Scene, motion: str, seed: int, speed: float | None,
+                rest: float) -> RigTrajectory:
+    traj = make_trajectory(scene.rig_path, motion, [seed, _STREAM_KEY["trajectory"]], speed=speed)
+    # RestStart has the RigTrajectory interface (state(t) -> RigState).
+    return RestStart(traj, float(rest)) if rest else traj  # type: ignore[return-value]
+
+
 def _check_target(final: Path, overwrite: bool) -> None:
     if not final.exists():
         return
@@ -423,6 +434,9 @@ def simulate_run(
     workers: int = 2,
     progress: Progress | None = None,
     layout: str | RunLayout = "coloradar",
+    imu: ImuModel | None = None,
+    rest: float = 0.0,
+    radar_time_offset: float = 0.0,
 ) -> SimResult:
     """Simulate one run and write it, with its calibration, under ``out``.
 
@@ -466,6 +480,16 @@ def simulate_run(
         ``"coloradar"`` or ``"coloradar_plus"`` (:mod:`coloradar.formats.layout`): folders,
         frame numbering and calib files as that release has them. ColoRadar+ has no
         single-chip radar and no Vicon; the simulator writes no camera images.
+    imu
+        The IMU's error model (default :data:`~coloradar.sim.imu.GX5_25`, the rig's
+        3DM-GX5-25 from its datasheet; ``GX5_25.scaled(0)`` for an ideal IMU).
+    rest
+        Seconds the rig stands still at the start before it eases into its motion
+        (:class:`~coloradar.sim.rest.RestStart`); 0: it moves from the start.
+    radar_time_offset
+        ``t_d`` [s]: both radars' timestamps lag the true frame times, ``stamp = t − t_d``
+        (an estimator must read a radar frame stamped ``t`` as the motion at ``t + t_d`` of
+        the IMU and ground-truth clock). Recorded in the truth as ``radar_time_offset``.
 
     Returns
     -------
@@ -493,6 +517,11 @@ def simulate_run(
         raise ColoradarError(f"speed must be in [0, 30] m/s, got {speed}")
     if not 0 < duration <= 3600:
         raise ColoradarError(f"duration must be in (0, 3600] s, got {duration}")
+    if not (np.isfinite(rest) and 0 <= rest < duration):
+        raise ColoradarError(f"rest must be in [0, duration) s, got {rest}")
+    if not (np.isfinite(radar_time_offset) and abs(radar_time_offset) <= 0.5):
+        raise ColoradarError(f"radar_time_offset must be within ±0.5 s, got {radar_time_offset}")
+    imu_model = imu or GX5_25
     sc = resolve_scene(scene)
     out = Path(out)
     name = name or run_name(sc.name, seed, start_time)
@@ -511,9 +540,9 @@ def simulate_run(
     if partial.exists():
         shutil.rmtree(partial)  # a previous, interrupted simulation of this run
     partial.mkdir(parents=True)
-    traj = make_trajectory(sc.rig_path, motion, [seed, _STREAM_KEY["trajectory"]], speed=speed)
+    traj = _trajectory(sc, motion, seed, speed, rest)
     ctx = _Context(sc, traj, calib, coupling_adc, seed, start_time, partial, progress, has_proc,
-                   lay)
+                   lay, imu_model, float(radar_time_offset))
     trng = ctx.rng("timing")
     # Every stream's timestamps, drawn in a fixed order whatever the sensor selection.
     times = {
@@ -525,7 +554,7 @@ def simulate_run(
                                      RADAR_MODELS["single_chip"].frame_jitter, trng),
         "lidar": _stream_times(RATES["lidar"], duration, LidarModel().period,
                                LidarModel().jitter, trng),
-        "imu": _stream_times(RATES["imu"], duration, 0.0, ImuModel().jitter, trng),
+        "imu": _stream_times(RATES["imu"], duration, 0.0, imu_model.jitter, trng),
         "vicon": _stream_times(RATES["vicon"], duration, 0.0, 1e-4, trng),
     }
     n_gt = int(np.ceil(duration * RATES["groundtruth"] - 1e-9)) + 1
@@ -552,7 +581,8 @@ def simulate_run(
         counts = _counts(sensors, vicon, times, gt_times, has_proc, lay)
         _write_run_info(ctx, partial, sc, dict(
             scene=sc.name, duration=duration, seed=seed, motion=motion, speed=speed,
-            sensors=list(sensors),
+            rest=float(rest), radar_time_offset=float(radar_time_offset),
+            imu_model=asdict(imu_model), sensors=list(sensors),
             vicon=vicon, heatmaps=has_proc, start_time=start_time, name=name,
             board_seed=board_seed, coloradar_version=__version__, counts=counts,
             layout=lay.name), truth)
@@ -593,11 +623,13 @@ def _write_slow_streams(ctx: _Context, sensors: Sequence[str], vicon: bool,
         write_poses(root / gt_table.path, poses)
     if "imu" in sensors:
         data, ab, gb = simulate_imu(traj, calib.transforms["imu"].matrix(), times["imu"],
-                                    ImuModel(), ctx.rng("imu"))
+                                    ctx.imu_model, ctx.rng("imu"))
         imu_table = ctx.layout.tables["imu"]
         write_timestamps(root / imu_table.timestamps_path, ctx.start_time + times["imu"])
         write_imu(root / imu_table.path, data)
-        truth.update({"imu_accel_bias": ab, "imu_gyro_bias": gb})
+        truth.update({"imu_timestamps": ctx.start_time + times["imu"],
+                      "imu_accel_bias": ab, "imu_gyro_bias": gb})
+    truth["radar_time_offset"] = np.float64(ctx.radar_time_offset)
     if vicon:
         vt = times["vicon"]
         st = traj.state(vt)
@@ -700,6 +732,5 @@ def open_simulation(run_path: str | os.PathLike[str]) -> Simulation:
     except json.JSONDecodeError as exc:
         raise FormatError(f"{cfg_path}: expected the JSON the simulator writes ({exc})") from None
     scene = load_scene(root / "truth" / "scene.json")
-    traj = make_trajectory(scene.rig_path, cfg["motion"], [cfg["seed"], _STREAM_KEY["trajectory"]],
-                           speed=cfg.get("speed"))
+    traj = _trajectory(scene, cfg["motion"], cfg["seed"], cfg.get("speed"), cfg.get("rest", 0.0))
     return Simulation(scene, traj, float(cfg["start_time"]), cfg)

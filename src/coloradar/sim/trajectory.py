@@ -196,7 +196,7 @@ def make_trajectory(path: Path, profile: str = "smooth",
     rng = np.random.default_rng(seed)
     if speed is not None:
         if not (np.isfinite(speed) and speed >= 0):
-            raise SettingsError(f"speed must be a finite non-negative number [m/s], got {speed!r}")
+            raise SettingsError(f"speed must be a finite non-negative number [m/s], got {float(speed):g}")
         if not isinstance(path, EllipsePath | LinePath):
             raise SettingsError(f"{type(path).__name__} has no speed to set")
         path = replace(path, speed=float(speed))

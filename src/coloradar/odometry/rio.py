@@ -1,0 +1,516 @@
+"""Radar-inertial odometry: the error-state EKF of :mod:`.eskf` driven by radar ego-velocities.
+
+:func:`rio_odometry` runs the whole chain on one run's data:
+
+1. **Zero-velocity detection** (:mod:`.zero_velocity`) at every radar frame, from the radar's
+   ego-speed and the IMU's quietness; nobody says when the rig stands still.
+2. **Initialisation** at the first usable radar frame: attitude from gravity
+   (:mod:`.gravity`; motion removed with the radar's velocities when the rig already moves),
+   gyro bias from the mean rate when that frame is static, velocity from the radar.
+3. **Propagation** with every IMU sample (:meth:`.ErrorStateEKF.propagate`).
+4. **Updates**, in time order over all radars: a static frame gives a zero-velocity update
+   (``v = 0``, σ ``zupt_std``) and a zero-rate update of the gyro bias (the mean rate of the IMU
+   samples since the previous one); any other usable frame gives a radar velocity update,
+   ``z = v_radar`` (RANSAC ego-velocity, :mod:`.ego_velocity`), covariance the RANSAC one plus
+   ``velocity_noise_floor²`` (the RANSAC covariance leaves out angle and Doppler-bin errors),
+   ``h(x) = R_irᵀ (Rᵀ v + ω × t_ir)`` at IMU time ``t + t_d``. Each update is gated by the
+   chi-square test of its normalised innovation at ``gate_probability``. A planar ego-velocity
+   (``v_z`` fixed at 0) updates ``v_z`` only loosely (``planar_vz_std``).
+5. **Output** at the first radar's frames (IMU clock, ``t + t_d``): ``world_T_base``, its 6 × 6
+   covariance (position, attitude), biases and time offsets.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from ..calib import Calibration
+from ..errors import ColoradarError, DataWarning, SettingsError
+from ..geometry import SE3, Trajectory, sensor_to_base
+from .dead_reckoning import integrate_gyro
+from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
+from .gravity import gravity_alignment
+from .velocity_track import EgoVelocityTrack
+from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames
+
+__all__ = ["RioConfig", "RioResult", "rio_odometry", "rio_summary"]
+
+_G0 = 9.80665
+_DEG = np.pi / 180.0
+
+
+@dataclass(frozen=True)
+class RioConfig:
+    """Settings of the radar-inertial filter.
+
+    The IMU defaults are the MicroStrain 3DM-GX5-25 datasheet's (MicroStrain/LORD, "3DM-GX5-25
+    Attitude and Heading Reference System", 8400-0093): noise densities 100 µg/√Hz and
+    0.005 °/s/√Hz, initial bias ±0.002 g and ±0.04 °/s, bias instability 0.04 mg and 8 °/h
+    (turned into random walks as instability / √(100 s)).
+
+    Attributes
+    ----------
+    accel_noise_density, gyro_noise_density
+        [m/s²/√Hz], [rad/s/√Hz].
+    accel_bias_walk, gyro_bias_walk
+        [m/s²/√s], [rad/s/√s].
+    accel_bias_std, gyro_bias_std
+        Initial bias uncertainty [m/s²], [rad/s] (turn-on bias).
+    velocity_noise_floor
+        Added in quadrature to each axis of the RANSAC ego-velocity covariance [m/s].
+    gate_probability
+        Chi-square gate of every update (an innovation beyond this quantile is rejected).
+    estimate_time_offset
+        Estimate each radar's time offset ``t_d`` online.
+    time_offset, time_offset_std
+        Its initial value and uncertainty [s].
+    time_offset_warmup
+        Seconds after the start before the time offset is estimated (until then it is held
+        at ``time_offset``): errors of the initial state are not to be read as an offset.
+    estimate_extrinsic_rotation
+        Estimate each radar's rotation relative to the IMU online (the calibration's as prior).
+    extrinsic_rotation_std
+        Prior uncertainty of that rotation [rad].
+    zero_velocity
+        The zero-velocity detector's settings.
+    planar_vz_std
+        A planar ego-velocity (``v_z`` fixed at 0, the single chip's) updates ``v_z`` with
+        this standard deviation [m/s]: the planar model's own assumption, held loosely.
+    zupt_std
+        Standard deviation of a zero-velocity update [m/s].
+    align_window
+        Seconds of IMU samples around the first frame used for gravity alignment.
+    moving_tilt_std
+        Roll/pitch uncertainty after aligning while the rig moves [rad] (at rest it follows
+        from ``accel_bias_std``).
+    anchor_delay
+        The output is anchored at the initial pose with the attitude estimated this many
+        seconds after the start, carried back by the gyro (the first estimate is the least
+        certain) [s].
+    max_rejected
+        After this many consecutive rejected frames per radar, with no update of any radar
+        accepted in between, the filter has lost the radars: its velocity restarts from the
+        next frame's measurement (counted as ``resets``).
+    """
+
+    accel_noise_density: float = 100e-6 * _G0
+    gyro_noise_density: float = 0.005 * _DEG
+    accel_bias_walk: float = 0.04e-3 * _G0 / 10.0
+    gyro_bias_walk: float = 8.0 * _DEG / 3600.0 / 10.0
+    accel_bias_std: float = 0.002 * _G0
+    gyro_bias_std: float = 0.04 * _DEG
+    velocity_noise_floor: float = 0.05
+    gate_probability: float = 0.999
+    estimate_time_offset: bool = True
+    time_offset: float = 0.0
+    time_offset_std: float = 0.05
+    time_offset_warmup: float = 3.0
+    estimate_extrinsic_rotation: bool = True
+    extrinsic_rotation_std: float = 1.0 * _DEG
+    zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
+    planar_vz_std: float = 0.1
+    zupt_std: float = 0.005
+    align_window: float = 0.5
+    moving_tilt_std: float = 3.0 * _DEG
+    max_rejected: int = 5
+    anchor_delay: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("accel_noise_density", "gyro_noise_density", "accel_bias_walk",
+                     "gyro_bias_walk", "accel_bias_std", "gyro_bias_std",
+                     "velocity_noise_floor", "time_offset_std", "extrinsic_rotation_std",
+                     "planar_vz_std", "zupt_std", "align_window", "time_offset_warmup",
+                     "anchor_delay", "moving_tilt_std"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise SettingsError(f"RioConfig.{name} must be a finite number >= 0, got {v!r}")
+        if self.max_rejected < 1:
+            raise SettingsError(f"max_rejected must be >= 1, got {self.max_rejected}")
+        if not 0 < self.gate_probability <= 1:
+            raise SettingsError(f"gate_probability must be in (0, 1], got {self.gate_probability}")
+
+    @property
+    def noise(self) -> ImuNoise:
+        """The process noise of the filter."""
+        return ImuNoise(self.accel_noise_density, self.gyro_noise_density,
+                        self.accel_bias_walk, self.gyro_bias_walk)
+
+
+@dataclass(frozen=True, eq=False)
+class RioResult:
+    """What the filter estimated at the first radar's frames (M poses).
+
+    Attributes
+    ----------
+    trajectory
+        ``world_T_base`` at the IMU-clock times ``t + t_d`` of the frames.
+    frame_timestamps
+        float64 ``(M,)``: the radar stamps of those frames [s].
+    covariance
+        float64 ``(M, 6, 6)``: covariance of the base position [m²] and attitude (world-frame
+        rotation vector) [rad²], in the output's world frame.
+    velocity
+        float64 ``(M, 3)``: the IMU's velocity, output world frame [m/s].
+    accel_bias, gyro_bias
+        float64 ``(M, 3)`` [m/s², rad/s] and their standard deviations ``*_std``.
+    time_offset, time_offset_std
+        float64 ``(M, R)`` [s], one column per radar.
+    extrinsic_rotation
+        float64 ``(R, 3)``: final rotation-vector correction of each radar's extrinsic
+        rotation, radar frame [rad] (0 when not estimated).
+    radars
+        The radars, in column order.
+    static
+        bool ``(M,)``: frames found static (zero-velocity update applied).
+    stats
+        Counts per radar: ``updates``, ``rejected``, ``zupts``, ``failed`` (no ego-velocity),
+        ``resets`` (velocity restarted after ``max_rejected`` rejections in a row).
+    """
+
+    trajectory: Trajectory
+    frame_timestamps: np.ndarray
+    covariance: np.ndarray
+    velocity: np.ndarray
+    accel_bias: np.ndarray
+    accel_bias_std: np.ndarray
+    gyro_bias: np.ndarray
+    gyro_bias_std: np.ndarray
+    time_offset: np.ndarray
+    time_offset_std: np.ndarray
+    extrinsic_rotation: np.ndarray
+    radars: tuple[str, ...]
+    static: np.ndarray
+    stats: dict[str, dict[str, int]]
+
+
+def _planar(track: EgoVelocityTrack) -> bool:
+    ok = track.ok & np.all(np.isfinite(track.velocity), axis=1)
+    return bool(ok.any()) and bool(np.all(track.velocity[ok, 2] == 0.0)
+                                   and np.all(track.covariance[ok, 2, :] == 0.0))
+
+
+def _initial_motion(track: EgoVelocityTrack, sel: np.ndarray, ekf: ErrorStateEKF,
+                    t_ir: np.ndarray, r_ir: np.ndarray, td: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """IMU-frame velocity at the first selected frame and the mean IMU-frame acceleration
+    over the selected frames, from the radar (``a_b = du/dt + ω × u``)."""
+    tt = track.timestamps[sel] + td
+    _, w = ekf.imu_at(tt)
+    u = (r_ir @ track.velocity[sel].T).T - np.cross(w, t_ir)
+    if sel.size < 3 or np.ptp(tt) < 0.1:
+        return u[0], np.zeros(3)
+    slope = np.polyfit(tt - tt[0], u, 1)[0]
+    return u[0], slope + np.cross(w.mean(0), u.mean(0))
+
+
+def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
+                 imu_timestamps: np.ndarray, imu_data: np.ndarray, *,
+                 radars: Sequence[str] | None = None, config: RioConfig | None = None,
+                 initial_pose: SE3 | None = None,
+                 groundtruth: Trajectory | None = None,
+                 still: Sequence[np.ndarray] | None = None) -> RioResult:
+    """Radar-inertial odometry of a run with the error-state EKF.
+
+    Parameters
+    ----------
+    tracks
+        Ego-velocities of one or more radars (:func:`~coloradar.odometry.run_ego_velocity`);
+        the output poses are at the first track's frames.
+    calib
+        Extrinsics ``base_T_imu`` and ``base_T_<radar>``.
+    imu_timestamps, imu_data
+        float64 ``(N,)`` [s] and ``(N, 6)`` ``ax ay az [m/s²] gx gy gz [rad/s]``, IMU frame.
+    radars
+        The radar of each track (default: each track's ``frame``).
+    config
+        Filter settings (default :class:`RioConfig`).
+    initial_pose
+        ``world_T_base`` of the first output pose; default the ground truth's there (when
+        given), else the identity. The filter's own world frame is gravity-aligned; the
+        output is its motion re-anchored at this pose.
+    groundtruth
+        Used only for the default ``initial_pose``.
+    still
+        Per track, bool ``(M_r,)``: whether each frame's cloud shows a still world
+        (:func:`~coloradar.odometry.zero_velocity.still_world`); None: judged from the
+        ego-velocities only.
+
+    Returns
+    -------
+    RioResult
+    """
+    cfg = config or RioConfig()
+    tr_list = [tracks] if isinstance(tracks, EgoVelocityTrack) else list(tracks)
+    if not tr_list:
+        raise SettingsError("rio_odometry needs at least one ego-velocity track")
+    names = tuple(radars) if radars is not None else tuple(t.frame for t in tr_list)
+    if len(names) != len(tr_list):
+        raise SettingsError(f"{len(tr_list)} tracks but {len(names)} radar names")
+    imu_t = np.asarray(imu_timestamps, dtype=np.float64).reshape(-1)
+    imu = np.asarray(imu_data, dtype=np.float64)
+    if imu.shape != (imu_t.size, 6):
+        raise SettingsError(f"expected IMU data of shape ({imu_t.size}, 6), got {imu.shape}")
+    good_imu = np.all(np.isfinite(imu), axis=1) & np.isfinite(imu_t)
+    imu_t, imu = imu_t[good_imu], imu[good_imu]
+    if imu_t.size < 10 or np.any(np.diff(imu_t) <= 0):
+        raise ColoradarError("radar-inertial odometry needs an IMU stream of at least 10 "
+                             "samples with strictly increasing timestamps")
+    n_r = len(tr_list)
+    ekf = ErrorStateEKF(imu_t, imu[:, :3], imu[:, 3:], cfg.noise, n_r)
+    base_T_imu = sensor_to_base(calib, "imu")
+    imu_T_base = base_T_imu.inverse()
+    ext = [base_T_imu.inverse() @ sensor_to_base(calib, n) for n in names]
+    t_ir = [e.translation for e in ext]
+    for r, e in enumerate(ext):
+        ekf.R_ir[r] = e.rotation.as_matrix()
+        ekf.td[r] = cfg.time_offset
+    planar = [_planar(t) for t in tr_list]
+    zv = cfg.zero_velocity
+    static = []
+    for r, tr in enumerate(tr_list):
+        quiet = imu_quiet(imu_t, imu[:, :3], imu[:, 3:], tr.timestamps + cfg.time_offset, zv)
+        static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv,
+                                    None if still is None else still[r]))
+
+    # -- initialisation at the first usable frame of the first radar ------------------------
+    prim = tr_list[0]
+    inside = (prim.timestamps + cfg.time_offset >= imu_t[0]) & \
+             (prim.timestamps + cfg.time_offset <= imu_t[-1])
+    measured = prim.ok & np.all(np.isfinite(prim.velocity), axis=1)
+    usable = np.flatnonzero(inside & (measured | static[0]))
+    if usable.size == 0:
+        raise ColoradarError(f"{prim.frame}: no radar frame with a usable ego-velocity lies "
+                             "within the IMU's time span; nothing to filter")
+    k0 = int(usable[0])
+    if k0 > 0 or not inside.all():
+        dropped = int(k0 + (~inside[k0:]).sum())
+        warnings.warn(f"{prim.frame}: {dropped} of {len(prim)} radar frames lie before the "
+                      "first usable one or outside the IMU's time span; left out",
+                      DataWarning, stacklevel=2)
+    t0 = float(prim.timestamps[k0] + cfg.time_offset)
+    half = cfg.align_window / 2
+    win = (imu_t >= t0 - half) & (imu_t <= t0 + half)
+    if win.sum() < 5:
+        win = np.argsort(np.abs(imu_t - t0))[:10]
+    f_win, w_win = imu[win, :3], imu[win, 3:]
+    is_static0 = bool(static[0][k0])
+    ekf.t = t0
+    P0 = np.zeros(ekf.dim)
+    if is_static0:
+        ekf.R = gravity_alignment(f_win)
+        ekf.bg = w_win.mean(axis=0)
+        ekf.v = np.zeros(3)
+        tilt = cfg.accel_bias_std / _G0
+        P0[V] = cfg.zupt_std**2
+        # The mean of white rate noise over the window, plus a floor for residual motion.
+        span = max(float(np.ptp(imu_t[win])), 1e-3)
+        P0[BG] = cfg.gyro_noise_density**2 / span + (2e-4) ** 2
+    else:
+        tt = prim.timestamps + cfg.time_offset
+        sel = np.flatnonzero(measured & inside & (tt >= t0) & (tt <= t0 + cfg.align_window))
+        u0, a_b = _initial_motion(prim, sel, ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset)
+        ekf.R = gravity_alignment(f_win, a_b)
+        ekf.v = ekf.R @ u0
+        tilt = cfg.moving_tilt_std
+        vstd = np.sqrt(np.max(np.diag(prim.covariance[k0])) + cfg.velocity_noise_floor**2)
+        P0[V] = vstd**2
+        P0[BG] = cfg.gyro_bias_std**2
+    P0[P] = 1e-12
+    P0[TH] = [tilt**2, tilt**2, (1e-3) ** 2]
+    P0[BA] = cfg.accel_bias_std**2
+    for r in range(n_r):
+        if cfg.estimate_extrinsic_rotation:
+            # A planar ego-velocity (v_x, v_y only) sees the radar's yaw, not its roll and
+            # pitch: those would only wander, so they stay at the calibration's.
+            sl = ekf.phi_slice(r)
+            P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if planar[r] \
+                else cfg.extrinsic_rotation_std**2
+    ekf.P = np.diag(P0)
+
+    # -- the event loop ----------------------------------------------------------------------
+    # Frames of the other radars from before the start are old news: left out.
+    events = sorted((float(tr.timestamps[k]), r, k) for r, tr in enumerate(tr_list)
+                    for k in range(len(tr))
+                    if (k >= k0 if r == 0 else tr.timestamps[k] + cfg.time_offset >= t0))
+    m = len(prim) - k0
+    out_t = np.full(m, np.nan)
+    out_stamp = prim.timestamps[k0:].copy()
+    out_R = np.zeros((m, 3, 3))
+    out_p = np.zeros((m, 3))
+    out_v = np.zeros((m, 3))
+    out_cov = np.zeros((m, 6, 6))
+    out_b = np.zeros((m, 4, 3))
+    out_td = np.zeros((m, 2, n_r))
+    stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0}
+             for n in names}
+    gate3 = float(chi2.ppf(cfg.gate_probability, 3)) if cfg.gate_probability < 1 else None
+    gates = {3: gate3}
+    last_zaru = t0
+    sig_w2 = cfg.gyro_noise_density**2
+    last_out = -np.inf
+    rejected_run = 0                              # radar frames rejected since any acceptance
+    td_on = np.zeros(n_r, dtype=bool)
+    for stamp, r, k in events:
+        tr = tr_list[r]
+        tau = max(stamp + ekf.td[r], ekf.t)
+        if r == 0 and tau <= last_out:
+            tau = last_out + 1e-6                 # poses strictly in time order
+        if tau > imu_t[-1]:
+            break
+        ekf.propagate(tau)
+        st = stats[names[r]]
+        if cfg.estimate_time_offset and not td_on[r] and tau - t0 >= cfg.time_offset_warmup:
+            # The time offset is estimated once the filter has settled: right after the
+            # start, errors of the initial state would be read as a time offset.
+            j = ekf.td_index(r)
+            ekf.P[j, :] = ekf.P[:, j] = 0.0
+            ekf.P[j, j] = cfg.time_offset_std**2
+            td_on[r] = True
+        if static[r][k]:
+            H = np.zeros((3, ekf.dim))
+            H[:, V] = np.eye(3)
+            acc, _ = ekf.update(-ekf.v, H, np.eye(3) * cfg.zupt_std**2, gates[3])
+            rejected_run = 0 if acc else rejected_run
+            sel = (imu_t > last_zaru) & (imu_t <= tau)
+            if sel.sum() >= 3:
+                Hg = np.zeros((3, ekf.dim))
+                Hg[:, BG] = np.eye(3)
+                span = max(tau - last_zaru, 1e-3)
+                z = imu[sel, 3:].mean(axis=0)
+                # The mean of white rate noise over `span` seconds, plus a floor for the
+                # rig's residual motion.
+                Rg = np.eye(3) * (sig_w2 / span + (2e-4) ** 2)
+                ekf.update(z - ekf.bg, Hg, Rg, gates[3])
+            last_zaru = tau
+            st["zupts" if acc else "rejected"] += 1
+        elif tr.ok[k] and np.all(np.isfinite(tr.velocity[k])):
+            y, H = ekf.radar_velocity_model(r, t_ir[r])
+            C = tr.covariance[k] + np.eye(3) * cfg.velocity_noise_floor**2
+            if planar[r]:
+                # v_z is not measured: the planar model's assumption v_z = 0, loosely.
+                C[2, :] = C[:, 2] = 0.0
+                C[2, 2] = cfg.planar_vz_std**2
+            acc, _ = ekf.update(tr.velocity[k] - y, H, C, gates[3])
+            st["updates" if acc else "rejected"] += 1
+            rejected_run = 0 if acc else rejected_run + 1
+            if rejected_run >= cfg.max_rejected * n_r:
+                # The filter has lost the radars (every frame of every radar for a while is
+                # an outlier): restart the velocity from this one, with its uncertainty.
+                w, _ = ekf.angular_state(tau)
+                u = ekf.R_ir[r] @ tr.velocity[k] - np.cross(w, t_ir[r])
+                ekf.v = ekf.R @ u
+                ekf.P[V, :] = 0.0
+                ekf.P[:, V] = 0.0
+                ekf.P[V, V] = ekf.R @ (ekf.R_ir[r] @ C @ ekf.R_ir[r].T) @ ekf.R.T \
+                    + np.eye(3) * cfg.velocity_noise_floor**2
+                rejected_run = 0
+                st["resets"] += 1
+            last_zaru = tau
+        else:
+            st["failed"] += 1
+        if r == 0:
+            i = k - k0
+            last_out = tau
+            out_t[i] = tau
+            out_R[i], out_p[i], out_v[i] = ekf.R, ekf.p, ekf.v
+            rb = ekf.R @ imu_T_base.translation
+            J = np.zeros((6, ekf.dim))
+            J[:3, P] = np.eye(3)
+            J[:3, TH] = -skew(rb)
+            J[3:, TH] = np.eye(3)
+            out_cov[i] = J @ ekf.P @ J.T
+            dg = np.diag(ekf.P)
+            out_b[i] = [ekf.ba, np.sqrt(dg[BA]), ekf.bg, np.sqrt(dg[BG])]
+            out_td[i, 0] = ekf.td
+            out_td[i, 1] = [np.sqrt(dg[ekf.td_index(j)]) for j in range(n_r)]
+    done = np.isfinite(out_t)
+    if not done.all():
+        warnings.warn(f"{prim.frame}: {int((~done).sum())} radar frames after the IMU's end; "
+                      "left out", DataWarning, stacklevel=2)
+    out_t, out_stamp, out_R, out_p, out_v = (a[done] for a in (out_t, out_stamp, out_R, out_p,
+                                                                out_v))
+    out_cov, out_b, out_td, st0 = out_cov[done], out_b[done], out_td[done], static[0][k0:][done]
+    # world_T_base in the filter's frame, then re-anchored at the initial pose.
+    rot_imu = Rotation.from_matrix(out_R)
+    rot_base = rot_imu * imu_T_base.rotation
+    pos_base = out_p + rot_imu.apply(np.tile(imu_T_base.translation, (len(out_p), 1)))
+    if initial_pose is None:
+        initial_pose = (groundtruth.at(out_t[0]) if groundtruth is not None
+                        and groundtruth.covers(out_t[:1])[0] else SE3.identity())
+    # The first attitude estimate is the least certain (gravity alignment, possibly while
+    # moving); the anchor uses the attitude `anchor_delay` seconds later carried back by the
+    # bias-corrected gyro, so that a start-up tilt error does not tilt the whole trajectory.
+    c = int(np.searchsorted(out_t, out_t[0] + cfg.anchor_delay))
+    c = min(c, len(out_t) - 1)
+    if c > 0:
+        sel = (imu_t > out_t[0]) & (imu_t < out_t[c])
+        tg = np.concatenate([[out_t[0]], imu_t[sel], [out_t[c]]])
+        _, wg = ekf.imu_at(tg)
+        back = integrate_gyro(tg, wg, bias=out_b[c, 2])[-1]     # imu(t0)_R_imu(tc)
+        rot0 = Rotation.from_matrix(out_R[c]) * back.inv() * imu_T_base.rotation
+    else:
+        rot0 = rot_base[0]
+    a_rot = initial_pose.rotation * rot0.inv()
+    a_t = initial_pose.translation - a_rot.apply(pos_base[0])
+    traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
+                      f"{names[0]} radar-inertial EKF")
+    am = a_rot.as_matrix()
+    big = np.zeros((6, 6))
+    big[:3, :3] = big[3:, 3:] = am
+    cov = big @ out_cov @ big.T
+    phi = np.zeros((n_r, 3))
+    for r in range(n_r):
+        phi[r] = Rotation.from_matrix(ext[r].rotation.as_matrix().T @ ekf.R_ir[r]).as_rotvec()
+    return RioResult(traj, out_stamp, cov, a_rot.apply(out_v), out_b[:, 0], out_b[:, 1],
+                     out_b[:, 2], out_b[:, 3], out_td[:, 0], out_td[:, 1], phi, names, st0,
+                     stats)
+
+
+def _floats(a: np.ndarray, digits: int = 9) -> list:
+    return np.round(np.asarray(a, dtype=np.float64), digits).tolist()
+
+
+def rio_summary(result: RioResult, config: RioConfig | None = None) -> dict:
+    """The filter's estimates as JSON-ready data (the ``"rio"`` entry of ``odometry.json``).
+
+    Keys: ``config`` (the settings), ``radars``, ``time_offset_s`` and ``time_offset_std_s``
+    (final, per radar), ``accel_bias_m_s2``, ``gyro_bias_rad_s`` and their ``*_std`` (final),
+    ``extrinsic_rotation_correction_deg`` (per radar, rotation vector in its frame),
+    ``static_frames``, ``stats`` (per radar: updates, rejected, zupts, failed) and ``poses``:
+    per output pose ``timestamp`` (IMU clock), ``radar_timestamp``, ``covariance_upper``
+    (the 21 entries of the upper triangle, row by row, of the 6 × 6 covariance of the base
+    position [m²] and attitude [rad²], world frame), ``accel_bias``, ``gyro_bias``,
+    ``time_offset`` and ``static``.
+    """
+    r = result
+    iu = np.triu_indices(6)
+    out: dict = {
+        "radars": list(r.radars),
+        "time_offset_s": _floats(r.time_offset[-1]),
+        "time_offset_std_s": _floats(r.time_offset_std[-1]),
+        "accel_bias_m_s2": _floats(r.accel_bias[-1]),
+        "accel_bias_std_m_s2": _floats(r.accel_bias_std[-1]),
+        "gyro_bias_rad_s": _floats(r.gyro_bias[-1]),
+        "gyro_bias_std_rad_s": _floats(r.gyro_bias_std[-1]),
+        "extrinsic_rotation_correction_deg": _floats(np.degrees(r.extrinsic_rotation), 6),
+        "static_frames": int(r.static.sum()),
+        "stats": r.stats,
+        "poses": {
+            "timestamp": _floats(r.trajectory.timestamps),
+            "radar_timestamp": _floats(r.frame_timestamps),
+            "covariance_upper": [_floats(c[iu], 12) for c in r.covariance],
+            "accel_bias": _floats(r.accel_bias),
+            "gyro_bias": _floats(r.gyro_bias, 12),
+            "time_offset": _floats(r.time_offset),
+            "static": [bool(x) for x in r.static],
+        },
+    }
+    if config is not None:
+        out = {"config": asdict(config), **out}
+    return out

@@ -1,0 +1,124 @@
+"""Automatic zero-velocity detection: the radar sees a still world and the IMU is quiet.
+
+Nobody tells the filter when the rig stands still. A radar frame is declared *static* when
+
+- its ego-velocity is usable and slower than ``max_speed``, or its cloud shows a still world
+  (:func:`still_world`: most points at zero range rate; this needs no ego-velocity, so it
+  holds for the sparse clouds of a radar at rest too), and
+- over ``window`` seconds around it the IMU is quiet: the per-axis standard deviation of the
+  angular rate is below ``max_gyro_std`` and that of the specific force below
+  ``max_accel_std`` (a rig moving at constant velocity would pass the radar test only at zero
+  speed anyway; the IMU test rejects a rig that turns or shakes in place).
+
+The thresholds default to a few times the 3DM-GX5-25's white noise at 300 Hz (0.0015 rad/s,
+0.017 m/s² per sample) with room for the vibration of a rig held still by hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames", "still_world"]
+
+
+@dataclass(frozen=True)
+class ZeroVelocityConfig:
+    """Settings of the zero-velocity detector.
+
+    Attributes
+    ----------
+    max_speed
+        Largest radar ego-speed of a static frame [m/s].
+    max_gyro_std, max_accel_std
+        Largest per-axis standard deviation of the IMU's rate [rad/s] and specific force
+        [m/s²] over the window.
+    window
+        Length of the IMU window centred on the frame [s].
+    still_rate, still_fraction, still_min_points
+        :func:`still_world`: a cloud of at least ``still_min_points`` points of which
+        ``still_fraction`` have ``|range rate| < still_rate`` [m/s] shows a still world.
+    """
+
+    max_speed: float = 0.03
+    max_gyro_std: float = 0.01
+    max_accel_std: float = 0.08
+    window: float = 0.4
+    still_rate: float = 0.05
+    still_fraction: float = 0.8
+    still_min_points: int = 3
+
+
+def still_world(cloud: np.ndarray, config: ZeroVelocityConfig | None = None,
+                min_range: float = 0.3) -> bool:
+    """Whether a radar point cloud shows a still world: at least ``still_min_points`` points
+    beyond ``min_range`` [m], and ``still_fraction`` of them with ``|range rate| <
+    still_rate``. It needs no ego-velocity, so it also holds for the sparse clouds of a radar
+    at rest (e.g. the single chip's on-board detections, too few for RANSAC).
+
+    Parameters
+    ----------
+    cloud
+        float ``(N, 5)``: ``x y z intensity range_rate``, radar frame.
+    """
+    cfg = config or ZeroVelocityConfig()
+    c = np.asarray(cloud)
+    if c.ndim != 2 or c.shape[1] < 5 or c.shape[0] == 0:
+        return False
+    r = np.linalg.norm(c[:, :3], axis=1)
+    rr = c[:, 4]
+    use = np.isfinite(r) & np.isfinite(rr) & (r > min_range)
+    n = int(use.sum())
+    if n < cfg.still_min_points:
+        return False
+    return bool(np.mean(np.abs(rr[use]) < cfg.still_rate) >= cfg.still_fraction)
+
+
+def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np.ndarray,
+              config: ZeroVelocityConfig) -> np.ndarray:
+    """bool ``(M,)``: whether the IMU is quiet in the window around each of ``times``.
+
+    Per-window sums come from cumulative sums, so the cost is O(N + M) whatever the window.
+    """
+    t = np.asarray(imu_t, dtype=np.float64)
+    times = np.asarray(times, dtype=np.float64)
+    lo = np.searchsorted(t, times - config.window / 2)
+    hi = np.searchsorted(t, times + config.window / 2)
+    n = hi - lo
+    out = np.zeros(times.size, dtype=bool)
+    for data, limit in ((imu_w, config.max_gyro_std), (imu_f, config.max_accel_std)):
+        x = np.asarray(data, dtype=np.float64)
+        x = x - x.mean(axis=0)                      # better conditioned sums
+        c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(x, 0)])
+        c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(x * x, 0)])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m1 = (c1[hi] - c1[lo]) / n[:, None]
+            var = (c2[hi] - c2[lo]) / n[:, None] - m1**2
+        ok = np.all(np.sqrt(np.maximum(var, 0.0)) < limit, axis=1)
+        out = ok if data is imu_w else out & ok
+    return out & (n >= 5)
+
+
+def static_frames(speeds: np.ndarray, ok: np.ndarray, quiet: np.ndarray,
+                  config: ZeroVelocityConfig, still: np.ndarray | None = None) -> np.ndarray:
+    """bool ``(M,)``: radar frames at which the rig is taken to stand still.
+
+    Parameters
+    ----------
+    speeds
+        float ``(M,)``: ego-speed of each frame [m/s] (NaN where not estimated).
+    ok
+        bool ``(M,)``: the frame has a usable ego-velocity.
+    quiet
+        bool ``(M,)``: :func:`imu_quiet` at the frames' times.
+    still
+        bool ``(M,)``: :func:`still_world` of each frame's cloud (a frame without an
+        ego-velocity can still show a still world); None: not known.
+    """
+    s = np.asarray(speeds, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        slow = np.asarray(ok, dtype=bool) & np.isfinite(s) & (s < config.max_speed)
+    if still is not None:
+        slow = slow | np.asarray(still, dtype=bool)
+    return slow & np.asarray(quiet, dtype=bool)
