@@ -76,3 +76,48 @@ def zip_folder(folder: Path, archive: Path, top: str | None = None) -> Path:
             rel = p.relative_to(folder).as_posix()
             zf.write(p, f"{top}/{rel}" if top else rel)
     return archive
+
+
+def exact_adc(calib, positions, velocities=None, amplitudes=1.0, *, noise_std: float = 0.0,
+              rng=None) -> np.ndarray:
+    """ADC frame of point scatterers from the exact spherical-wave delays (tests only).
+
+    Independent of coloradar's processor and of the simulator's narrowband model: for every
+    TX ``t``, RX ``r``, chirp loop ``c`` and sample ``n`` the scatterer sits at
+    ``x(T) = x0 + v·T`` (``T`` = chirp start ``(c·Ntx + t)·Tc`` + sample time ``t_n``), the
+    delay is ``τ = (|x(T) − p_t| + |x(T) − p_r|)/c0`` with the antennas at ``(0, y, z)`` of the
+    antenna file (half wavelengths of the design frequency), and the IF sample is
+    ``a/R0² · exp(j2π(f_start·τ + S·t_n·τ − S·τ²/2))`` (TI's complex baseband, receding =
+    growing delay). Range migration, the beat-frequency shift of each antenna's own path
+    length and the range–Doppler coupling are all in it.
+
+    Parameters are as :func:`coloradar.sim.synthesize_adc`; returns complex64
+    ``(tx, rx, chirp, sample)``.
+    """
+    c0 = 299_792_458.0
+    w, ant = calib.waveform, calib.antenna
+    p = np.atleast_2d(np.asarray(positions, dtype=np.float64))
+    v = np.zeros_like(p) if velocities is None else np.atleast_2d(np.asarray(velocities, float))
+    a = np.broadcast_to(np.asarray(amplitudes, dtype=np.complex128), (p.shape[0],))
+    ntx, nrx, nc, ns = w.frame_shape
+    hw = ant.half_wavelength
+    tx = np.zeros((ntx, 3))
+    tx[:, 1:] = ant.tx_positions * hw
+    rx = np.zeros((nrx, 3))
+    rx[:, 1:] = ant.rx_positions * hw
+    t_n = w.adc_start_time + np.arange(ns) / w.sample_rate                      # (ns,)
+    t_chirp = ((np.arange(nc)[None, :] * ntx + np.arange(ntx)[:, None])
+               * (w.idle_time + w.ramp_end_time))                               # (tx, c)
+    big_t = t_chirp[:, None, :, None] + t_n[None, None, None, :]                # (tx, 1, c, ns)
+    out = np.zeros((ntx, nrx, nc, ns), dtype=np.complex128)
+    for x0, vk, ak in zip(p, v, a, strict=True):
+        pos = x0[None, None, None, None, :] + vk * big_t[..., None]             # (tx,1,c,ns,3)
+        d_t = np.linalg.norm(pos - tx[:, None, None, None, :], axis=-1)         # (tx,1,c,ns)
+        d_r = np.linalg.norm(pos - rx[None, :, None, None, :], axis=-1)         # (tx,rx,c,ns)
+        tau = (d_t + d_r) / c0
+        phase = 2 * np.pi * ((w.start_frequency + w.slope * t_n) * tau - 0.5 * w.slope * tau**2)
+        out += ak / float(np.dot(x0, x0)) * np.exp(1j * phase)
+    if noise_std > 0:
+        g = np.random.default_rng(rng)
+        out += noise_std * (g.standard_normal(out.shape) + 1j * g.standard_normal(out.shape))
+    return out.astype(np.complex64)

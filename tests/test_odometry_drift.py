@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from _trajectories import T0
+from _trajectories import wander as _wander
 from coloradar.geometry import Trajectory
 from coloradar.odometry import (
     absolute_trajectory_error,
@@ -15,17 +17,6 @@ from coloradar.odometry import (
     write_evaluation,
 )
 from coloradar.odometry.metrics import DRIFT_LENGTHS, final_position_error, trajectory_drift
-
-T0 = 1_608_580_000.0
-
-
-def _wander(n=400, seed=3):
-    rng = np.random.default_rng(seed)
-    t = T0 + np.arange(n) * 0.1
-    steps = rng.uniform(0.02, 0.25, (n, 1)) * rng.normal(size=(n, 3))
-    steps[0] = 0.0
-    rot = Rotation.from_rotvec(np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0))
-    return Trajectory(t, np.cumsum(steps, axis=0), rot, "reference")
 
 
 def _drifting(ref, seed=4):
@@ -71,7 +62,7 @@ def _kitti_brute(est, ref, lengths):
 
 @pytest.mark.parametrize("lengths", [DRIFT_LENGTHS, (1.0, 3.0)])
 def test_kitti_style_drift_matches_a_brute_force_of_the_devkit_rule(lengths):
-    ref = _wander()
+    ref = _wander(n=400)
     est = _drifting(ref)
     t_pct, r_deg_m, segments = _kitti_brute(est, ref, lengths)
     d = trajectory_drift(est, ref, lengths)

@@ -9,20 +9,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from _trajectories import wander as _wander
 from coloradar.geometry import Trajectory
 from coloradar.odometry import RPE_PAIRINGS, path_length, relative_pose_error, rpe_pairs
-
-T0 = 1_608_580_000.0
-
-
-def _wander(n=300, seed=3):
-    """A random walk with uneven steps (no two path lengths tie) and turning attitude."""
-    rng = np.random.default_rng(seed)
-    t = T0 + np.arange(n) * 0.1
-    steps = rng.uniform(0.02, 0.25, (n, 1)) * rng.normal(size=(n, 3))
-    steps[0] = 0.0
-    rot = Rotation.from_rotvec(np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0))
-    return Trajectory(t, np.cumsum(steps, axis=0), rot, "reference")
 
 
 def _noisy(ref, seed=4):

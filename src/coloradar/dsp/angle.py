@@ -22,10 +22,21 @@ the difference co-array, so the spectrum costs two small FFTs, not one quadratic
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft as sfft
 
 from .array import AngleGrid, beamform
 
-__all__ = ["bartlett_spectrum", "capon_spectrum", "covariance", "refine_peak"]
+__all__ = [
+    "NearField",
+    "azimuth_peaks",
+    "bartlett_spectrum",
+    "capon_spectrum",
+    "covariance",
+    "newton_refine",
+    "refine_peak",
+    "row_profile",
+    "steering",
+]
 
 
 def bartlett_spectrum(grid: AngleGrid, vectors: np.ndarray, workers: int = 1) -> np.ndarray:
@@ -121,9 +132,210 @@ def refine_peak(values: np.ndarray, index: np.ndarray, axis_len: int, wrap: bool
     """
     lv = np.log(np.maximum(np.asarray(values, dtype=np.float64), 1e-300))
     den = lv[:, 0] - 2.0 * lv[:, 1] + lv[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.where(den < 0, 0.5 * (lv[:, 0] - lv[:, 2]) / den, 0.0)
-    delta = np.clip(np.nan_to_num(delta), -0.5, 0.5)
+    neg = den < 0
+    delta = np.where(neg, 0.5 * (lv[:, 0] - lv[:, 2]) / np.where(neg, den, -1.0), 0.0)
+    delta = np.clip(delta, -0.5, 0.5)
     if not wrap:
         delta = np.where((index <= 0) | (index >= axis_len - 1), 0.0, delta)
     return index + delta
+
+
+def steering(grid: AngleGrid, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
+    """Conjugate steering vectors of the grid's unique elements at arbitrary direction sines.
+
+    ``exp(+jπρ(s_az·p_az,m·u_y + s_el·p_el,m·u_z))``: the factor that the Bartlett beam
+    ``Σ_m x_m·(·)`` of :func:`bartlett_spectrum` applies, evaluated off the FFT grid.
+
+    Returns
+    -------
+    numpy.ndarray
+        complex64 ``(M, K)``.
+    """
+    # float32 phases (at most a few hundred radians: ~3e-5 rad of rounding) and cos/sin
+    a = np.float32(np.pi * grid.rho * grid.azimuth_sign) * grid.az_pos.astype(np.float32)
+    b = np.float32(np.pi * grid.rho * grid.elevation_sign) * grid.el_pos.astype(np.float32)
+    phase = (a[:, None] * np.asarray(uy, dtype=np.float32)[None, :]
+             + b[:, None] * np.asarray(uz, dtype=np.float32)[None, :])
+    out = np.empty(phase.shape, dtype=np.complex64)
+    out.real = np.cos(phase)
+    out.imag = np.sin(phase)
+    return out
+
+
+def row_profile(grid: AngleGrid, vectors: np.ndarray, workers: int = 1) -> np.ndarray:
+    """Azimuth beam power of the most populated elevation row alone, float32 ``(K, num_az)``.
+
+    A row is a line array along azimuth: its spectrum measures ``u_y`` whatever the
+    elevation, and two sources make no ghosts in elevation (the sparse elevation rows do:
+    the 2D spectrum of two sources can peak between them at a wrong elevation). Used to find
+    how many sources a cell holds and their azimuths; the full array refines them.
+    """
+    rows, counts = np.unique(grid.el_pos, return_counts=True)
+    sel = grid.el_pos == rows[np.argmax(counts)]
+    x = np.asarray(vectors)[:, sel]
+    buf = np.zeros((x.shape[0], grid.n_az), dtype=np.complex64)
+    buf[:, grid.az_pos[sel]] = x
+    spec = sfft.fft(buf, axis=1, workers=workers)[:, grid.az_read]
+    mag = np.abs(spec) * np.float32(1.0 / sel.sum())
+    return np.square(mag, out=mag)
+
+
+def azimuth_peaks(profile: np.ndarray, relative: float, floor: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Every significant peak of each azimuth profile.
+
+    As TI's cascade DOA (mmWave Studio's ``DOACascade``/``DOA_BF_PeakDet_loc``: several peaks
+    along azimuth, one elevation for each), a local maximum of the profile (the axis is
+    circular, as an FFT spectrum) counts when it is at least ``relative`` times the
+    strongest peak and above ``floor``; the strongest peak always counts.
+
+    Parameters
+    ----------
+    profile
+        float ``(K, num_az)`` azimuth profiles (invisible bins zeroed).
+    relative
+        Linear fraction of the strongest peak.
+    floor
+        float ``(K,)``: absolute threshold per profile (noise).
+
+    Returns
+    -------
+    tuple
+        int64 arrays ``(k, az)`` of the peaks, the strongest of each profile first.
+    """
+    k = profile.shape[0]
+    if k == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e
+    prof = profile
+    left, right = np.roll(prof, 1, axis=1), np.roll(prof, -1, axis=1)
+    top = prof.max(axis=1, keepdims=True)
+    ok = (prof > left) & (prof >= right) & (prof >= relative * top) & (prof >= floor[:, None])
+    ok[np.arange(k), prof.argmax(axis=1)] = True
+    kk, ia = np.nonzero(ok)
+    order = np.lexsort((-prof[kk, ia], kk))
+    return kk[order].astype(np.int64), ia[order].astype(np.int64)
+
+
+def newton_refine(grid: AngleGrid, vectors: np.ndarray, uy: np.ndarray, uz: np.ndarray,
+                  max_step: tuple[float, float], iterations: int = 2, elevation: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Maximise the Bartlett beam power ``|B(u)|²`` off the grid by Newton steps.
+
+    ``B(u) = Σ_m x_m exp(jπρ(s_az p_m u_y + s_el q_m u_z))``; its gradient and Hessian in
+    ``(u_y, u_z)`` are sums over the elements, so each step costs a few dot products per
+    detection. Steps are limited to ``max_step`` (a fraction of the grid spacing, per axis)
+    and a step that lowers the power is not taken, so the result never leaves the peak the
+    grid found.
+
+    Parameters
+    ----------
+    grid
+        Angle grid of the unique elements.
+    vectors
+        complex ``(K, M)``.
+    uy, uz
+        float ``(K,)`` starting direction sines.
+    max_step
+        Largest step along ``(u_y, u_z)``.
+    iterations
+        Newton steps.
+    elevation
+        Refine ``u_z`` too (off: azimuth only).
+
+    Returns
+    -------
+    tuple
+        ``(u_y, u_z, power)`` float64 ``(K,)``; power in the units of
+        :func:`bartlett_spectrum`.
+    """
+    x = np.asarray(vectors, dtype=np.complex64)
+    m = grid.num_elements
+    a = (np.pi * grid.rho * grid.azimuth_sign * grid.az_pos).astype(np.float32)
+    b = (np.pi * grid.rho * grid.elevation_sign * grid.el_pos).astype(np.float32)
+    uy = np.asarray(uy, dtype=np.float64).copy()
+    uz = np.asarray(uz, dtype=np.float64).copy()
+
+    def beam(uy_: np.ndarray, uz_: np.ndarray):
+        ph = (a[None, :] * uy_[:, None].astype(np.float32)
+              + b[None, :] * uz_[:, None].astype(np.float32))
+        e = np.empty(ph.shape, dtype=np.complex64)
+        e.real = np.cos(ph)
+        e.imag = np.sin(ph)
+        return x * e
+
+    def power(uy_: np.ndarray, uz_: np.ndarray) -> np.ndarray:
+        return np.abs(beam(uy_, uz_).sum(axis=1)) ** 2
+
+    ca, cb_ = a.astype(np.complex64), b.astype(np.complex64)
+    caa, cbb, cab = ca * ca, cb_ * cb_, ca * cb_
+    p0 = power(uy, uz).astype(np.float64)
+    for _ in range(iterations):
+        z = beam(uy, uz)
+        bv = z.sum(axis=1)
+        # (einsum, not BLAS: deterministic whatever the threads)
+        by, bz = 1j * np.einsum("km,m->k", z, ca), 1j * np.einsum("km,m->k", z, cb_)
+        byy = -np.einsum("km,m->k", z, caa)
+        bzz = -np.einsum("km,m->k", z, cbb)
+        byz = -np.einsum("km,m->k", z, cab)
+        cb = np.conj(bv)
+        gy = 2 * np.real(cb * by)
+        gz = 2 * np.real(cb * bz)
+        hyy = 2 * np.real(np.abs(by) ** 2 + cb * byy)
+        hzz = 2 * np.real(np.abs(bz) ** 2 + cb * bzz)
+        hyz = 2 * np.real(np.conj(by) * bz + cb * byz)
+        if elevation:
+            det = hyy * hzz - hyz**2
+            good = (hyy < 0) & (det > 0)
+            safe = np.where(good, det, 1.0)
+            sy = np.where(good, -(hzz * gy - hyz * gz) / safe, 0.0)
+            sz = np.where(good, -(hyy * gz - hyz * gy) / safe, 0.0)
+        else:
+            good = hyy < 0
+            sy = np.where(good, -gy / np.where(good, hyy, 1.0), 0.0)
+            sz = np.zeros_like(sy)
+        sy = np.clip(sy, -max_step[0], max_step[0])
+        sz = np.clip(sz, -max_step[1], max_step[1])
+        p1 = power(uy + sy, uz + sz)
+        better = p1 > p0
+        uy = np.where(better, uy + sy, uy)
+        uz = np.where(better, uz + sz, uz)
+        p0 = np.where(better, p1, p0)
+    return uy, uz, p0 / float(m * m)
+
+
+class NearField:
+    """Focusing phases of the unique virtual elements for a source at a finite range.
+
+    The far-field steering vector assumes plane waves. A (TX, RX) pair whose antennas sit at
+    ``a`` and ``b`` from the array's phase centre sees a source at range ``ρ`` and direction
+    ``u`` (from the phase centre) over the round trip ``2ρ − u·(a + b) + q``,
+    ``q = (|a|² − (u·a)² + |b|² − (u·b)²)/(2ρ)`` (second order in ``|a|/ρ``). The cascade's
+    16 cm aperture has its Fraunhofer distance near 15 m, beyond the processed range, and
+    ``k·q`` reaches a radian across it at 4 m: the far-field beam defocuses (shoulders and
+    raised sidelobes that look like further targets). Multiplying element ``m`` by
+    ``exp(−jk·q_m)`` focuses the beam at ``(ρ, u)``.
+
+    Parameters
+    ----------
+    tx, rx
+        float ``(M, 3)`` [m]: the transmit and receive antenna of each unique element's pair,
+        relative to the phase centre (radar frame, signs applied).
+    wavenumber
+        ``2π f_c / c`` [rad/m].
+    """
+
+    def __init__(self, tx: np.ndarray, rx: np.ndarray, wavenumber: float) -> None:
+        self.tx = np.asarray(tx, dtype=np.float64)
+        self.rx = np.asarray(rx, dtype=np.float64)
+        self.wavenumber = float(wavenumber)
+        self._sq = (self.tx**2).sum(axis=1) + (self.rx**2).sum(axis=1)          # (M,)
+
+    def focus(self, unit: np.ndarray, rng: np.ndarray) -> np.ndarray:
+        """complex64 ``(M, K)``: ``exp(−jk·q_m)`` for directions ``unit`` ``(K, 3)`` and
+        ranges ``rng`` ``(K,)`` [m] from the phase centre."""
+        u = np.asarray(unit, dtype=np.float64)
+        q = (self._sq[:, None] - np.einsum("mi,ki->mk", self.tx, u) ** 2
+             - np.einsum("mi,ki->mk", self.rx, u) ** 2) \
+            / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))[None, :]
+        return np.exp(-1j * self.wavenumber * q).astype(np.complex64)

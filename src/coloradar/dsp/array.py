@@ -27,7 +27,7 @@ from ..calib import AntennaConfig, VirtualArray
 from ..errors import CalibrationError, SettingsError
 
 __all__ = ["OVERLAP_MODES", "AngleGrid", "OverlapMode", "angle_grid", "beamform", "combine_channels",
-           "sines_to_unit"]
+           "pair_antennas", "phase_centre", "sines_to_unit"]
 
 OverlapMode = Literal["first", "average"]
 """Virtual pairs sharing a position: keep the TX-major first one, or average them."""
@@ -229,3 +229,39 @@ def beamform(grid: AngleGrid, values: np.ndarray, el_pos: np.ndarray | None = No
     spec = sfft.fft(buf, n=grid.n_az, axis=2, workers=workers)
     spec = sfft.fft(spec, n=grid.n_el, axis=1, workers=workers, overwrite_x=True)
     return spec[:, grid.el_read[:, None], grid.az_read[None, :]]
+
+
+def phase_centre(antenna: AntennaConfig, azimuth_sign: int = 1, elevation_sign: int = 1
+                 ) -> np.ndarray:
+    """Phase centre of the unique virtual elements in the radar frame, float64 ``(3,)`` [m].
+
+    The virtual element of a (TX, RX) pair sits, for the two-way path, at the midpoint
+    ``(p_tx + p_rx)/2`` of the two antennas: the range FFT of that channel measures
+    ``(|x − p_tx| + |x − p_rx|)/2 ≈ |x − (p_tx + p_rx)/2|``. A beam over the unique elements
+    (equal weights) therefore measures range and direction from their centroid, not from the
+    radar origin where the antenna file's coordinates start (docs/dsp.md, "Where a point
+    is").
+    """
+    pos = antenna.virtual.unique_positions.astype(np.float64).mean(axis=0)   # (az, el) half-λ
+    half = 0.5 * antenna.half_wavelength
+    return np.array([0.0, azimuth_sign * pos[0] * half, elevation_sign * pos[1] * half])
+
+
+def pair_antennas(antenna: AntennaConfig, azimuth_sign: int = 1, elevation_sign: int = 1
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Transmit and receive antenna of each unique virtual element's first pair.
+
+    Returns
+    -------
+    tuple
+        float64 ``(M, 3)`` each [m], radar frame (x = 0; y, z from the antenna file's az, el
+        with the sign settings), in the order of ``virtual.unique_positions``.
+    """
+    first = antenna.virtual.first_pair
+    sign = np.array([azimuth_sign, elevation_sign], dtype=np.float64)
+    out = []
+    for pos, idx in ((antenna.tx_positions, first[:, 0]), (antenna.rx_positions, first[:, 1])):
+        p = np.zeros((idx.size, 3))
+        p[:, 1:] = np.asarray(pos, dtype=np.float64)[idx] * sign * antenna.half_wavelength
+        out.append(p)
+    return out[0], out[1]

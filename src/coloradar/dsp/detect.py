@@ -20,7 +20,7 @@ from .array import sines_to_unit
 from .cfar import CFAREdge, CFARKind, cfar
 
 __all__ = ["Detections", "channel_noise", "heatmap_cell_xyz", "heatmap_pointcloud", "local_maxima",
-           "sidelobe_envelope", "sidelobe_mask"]
+           "sidelobe_envelope", "sidelobe_mask", "sidelobe_pairs"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,6 +192,48 @@ def sidelobe_mask(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndar
         explained = stronger & (excess[i, None] < margin * power[None, :] * leak)
         keep[i] = ~explained.any(axis=1)
     return keep
+
+
+def sidelobe_pairs(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndarray,
+                   excess: np.ndarray, ref_doppler: np.ndarray, ref_range: np.ndarray,
+                   ref_power: np.ndarray, env_doppler: np.ndarray, env_range: np.ndarray,
+                   num_doppler: int, margin: float, min_lag: int = 2
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs (point, stronger cell) where the cell's window sidelobes could explain the point.
+
+    As :func:`sidelobe_mask`, but between points and a separate set of reference cells, and
+    only for references at least ``min_lag`` bins away along range or Doppler (neighbouring
+    cells are one target's main lobe: the beam grouping decides there). Point ``i`` is
+    explained by reference ``j`` when ``power_j > power_i`` and
+    ``excess_i < margin · power_j · E_d(|Δd|) · E_r(|Δr|)``.
+
+    Returns
+    -------
+    tuple
+        int64 ``(P,)`` point indices, int64 ``(P,)`` reference indices and float64 ``(P,)``
+        leakage factors ``E_d·E_r`` of every such pair.
+    """
+    k, n = power.size, ref_power.size
+    out_i, out_j, out_l = [], [], []
+    step = max(1, (1 << 20) // max(n, 1))
+    for i0 in range(0, k, step):
+        i = slice(i0, min(k, i0 + step))
+        dd = np.abs(doppler_bin[i, None] - ref_doppler[None, :])
+        dd = np.minimum(dd, num_doppler - dd)
+        dr = np.abs(range_bin[i, None] - ref_range[None, :])
+        leak = (env_doppler[np.minimum(dd, env_doppler.size - 1)]
+                * env_range[np.minimum(dr, env_range.size - 1)])
+        hit = ((ref_power[None, :] > power[i, None]) & (np.maximum(dd, dr) >= min_lag)
+               & (excess[i, None] < margin * ref_power[None, :] * leak))
+        a, b = np.nonzero(hit)
+        out_i.append(a + i0)
+        out_j.append(b)
+        out_l.append(leak[a, b])
+    if not out_i:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e, np.zeros(0)
+    return (np.concatenate(out_i).astype(np.int64), np.concatenate(out_j).astype(np.int64),
+            np.concatenate(out_l))
 
 
 def heatmap_cell_xyz(config: HeatmapConfig, el: np.ndarray, az: np.ndarray,

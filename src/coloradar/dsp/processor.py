@@ -13,7 +13,9 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
       → range FFT, keep the first num_range_bins → Doppler FFT
       × exp(−j2π k t/(n·Ntx))      (TDM-MIMO compensation)            = range_doppler(adc)
       → Σ|·|² over channels        (non-coherent)                     = range_doppler_power(adc)
-      → CFAR (Doppler circular, range mirrored) → local maxima → angle per detection = detect(adc)
+      → CFAR (Doppler circular, range truncated) → peaks → every significant angle peak of
+        each cell → beam grouping, sidelobe guard → points from the array's phase centre
+                                                                        = detect(adc)
       → unique virtual elements → 2D angle FFT per cell → peak over Doppler      = heatmap(adc)
 """
 
@@ -24,12 +26,29 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
+from scipy.ndimage import maximum_filter
 
 from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
 from ..errors import FormatError, SettingsError
-from .angle import bartlett_spectrum, capon_spectrum, refine_peak
-from .array import OVERLAP_MODES, OverlapMode, angle_grid, combine_channels, sines_to_unit
+from .angle import (
+    NearField,
+    azimuth_peaks,
+    capon_spectrum,
+    newton_refine,
+    refine_peak,
+    row_profile,
+    steering,
+)
+from .array import (
+    OVERLAP_MODES,
+    OverlapMode,
+    angle_grid,
+    combine_channels,
+    pair_antennas,
+    phase_centre,
+    sines_to_unit,
+)
 from .cfar import (
     CFAR_KINDS,
     CFAREdge,
@@ -40,10 +59,15 @@ from .cfar import (
     power_correlation,
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
-from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_mask
+from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_pairs
 from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
+
+MAX_SOURCES = 4
+"""Most angle peaks examined per range–Doppler cell (strongest first)."""
+STRONG_NEIGHBOUR = 10.0
+"""A 2D peak this many times its CFAR noise (10 dB) has its neighbours examined too."""
 
 __all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AngleMethod", "CouplingDomain",
            "NoiseWeighting", "ProcessingSettings", "RadarProcessor"]
@@ -107,6 +131,11 @@ class ProcessingSettings:
         alias hypotheses whose range rate stays within it (at most Ntx of them) and keeps the
         best (:mod:`coloradar.dsp.tdm`); 0 switches the search off (folded range rates, and
         angles compensated for the folded Doppler).
+    alias_margin_db
+        Radars without overlapping virtual pairs (the single chip) choose the Doppler alias
+        by the highest beam peak; another hypothesis must beat the folded one by this margin
+        [dB] (two sources in one cell can favour a wrong one by ~1 dB; a wrong hypothesis
+        defocuses a lone source by several).
     heatmap_unwrap
         Heatmaps with disambiguated Doppler: cells that pass the CFAR are compensated for
         their best alias hypothesis before the angle FFT, and channel 1 carries the unwrapped
@@ -124,7 +153,39 @@ class ProcessingSettings:
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping
-        Keep only detections that are local maxima of the range–Doppler power (3×3).
+        Group the cells of one target into one point: CFAR cells that peak along Doppler or
+        along range are examined, and a point is kept only where its cell's beam, steered at
+        the point's direction, is not smaller than that of any of the 8 neighbouring
+        range–Doppler cells (so a target one bin from a stronger one in another direction
+        stays). False: every CFAR cell makes points.
+    multi_peak
+        Every significant peak of a cell's azimuth profile becomes a point (two scatterers
+        at one range and range rate, as a wall on each side of a corridor): a secondary peak
+        counts when, with the strongest source's response (its sidelobes) removed, what is
+        left in its direction is above the beam noise at ``angle_pfa`` and within
+        ``angle_dynamic_range_db`` of the strongest. False: one point per cell.
+    angle_pfa
+        Probability that noise alone makes a secondary angle peak in a cell.
+    angle_dynamic_range_db
+        A secondary angle peak of a cell counts only within this many dB of the cell's
+        strongest source, after that source's response is removed (model errors of real
+        arrays: calibration residue, mutual coupling).
+    near_field
+        Focus beams at the detection's range (:class:`~coloradar.dsp.angle.NearField`): the
+        cascade's aperture is in its near field over the whole processed range. Off by
+        default: a calibration measured on a near reflector (the release's cascade file: a
+        reflector at ≈ 3.0 m, from its bins) already focuses every channel at that range,
+        and focusing again would add its phases twice (docs/dsp.md, "Near field"). On for
+        frames whose calibration carries no near-field phases (simulated frames).
+    phase_centre
+        Points from the virtual array's phase centre (True: the physics of a real array, whose
+        range FFT and beams measure range and direction from it; the point is that position
+        in the radar frame). False: range and direction taken as seen from the radar origin,
+        as the simulator's narrowband far-field model (:mod:`coloradar.sim.radar_if`) makes
+        them (docs/dsp.md, "Where a point is").
+    angle_refine
+        Refine each direction off the grid by Newton steps on the Bartlett beam power
+        (``angle_method="fft"``), after the log-parabola on the grid.
     angle_method
         ``"fft"`` (Bartlett) or ``"capon"`` (MVDR per detection, see :mod:`coloradar.dsp.angle`).
     angle_oversample
@@ -164,12 +225,19 @@ class ProcessingSettings:
     cfar_rank: float = 0.75
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
-    doppler_unwrap: float = 5.0
+    doppler_unwrap: float = 10.0
+    alias_margin_db: float = 0.0
     heatmap_unwrap: bool = False
     sidelobe_guard: bool = True
     sidelobe_margin_db: float = 6.0
     min_range: float = 0.3
     peak_grouping: bool = True
+    multi_peak: bool = True
+    angle_pfa: float = 1e-3
+    angle_refine: bool = True
+    angle_dynamic_range_db: float = 20.0
+    near_field: bool = False
+    phase_centre: bool = True
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
     capon_loading: float = 0.05
@@ -191,6 +259,8 @@ class ProcessingSettings:
         if not self.doppler_unwrap >= 0:
             raise SettingsError(f"doppler_unwrap must be >= 0 m/s (0 = off), got "
                                 f"{self.doppler_unwrap!r}")
+        if not 0.0 < self.angle_pfa < 1.0:
+            raise SettingsError(f"angle_pfa must lie in (0, 1), got {self.angle_pfa!r}")
         if self.angle_oversample < 1 or self.capon_loading <= 0:
             raise SettingsError("angle_oversample must be >= 1 and capon_loading > 0")
         for name in ("cfar_guard", "cfar_train"):
@@ -363,6 +433,40 @@ class RadarProcessor:
         self._env_d = sidelobe_envelope(window(s.doppler_window, nc), nd, nd // 2 + 1)
         self._env_r = sidelobe_envelope(window(s.range_window, ns), self.range_fft_size,
                                         self.num_range_bins)
+        # Channels whose coupling the file does not hold (the single chip's all-zero TX 2
+        # block): their leakage stays in the zero-Doppler bin at every range, so that bin's
+        # detection statistic leaves them out (scaled to the same noise mean).
+        self._uncoupled = None
+        cpl = self.calib.coupling
+        if s.coupling_subtraction and cpl is not None and cpl.missing_tx:
+            miss = np.zeros((ntx, nrx), dtype=bool)
+            miss[list(cpl.missing_tx)] = True
+            self._uncoupled = miss.ravel()
+        # Where a point is: range and direction are measured from the virtual array's phase
+        # centre; the Doppler shift within a chirp moves the beat frequency (f_c·v/S of range).
+        self._centre = (phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+                        if s.phase_centre else np.zeros(3))
+        self._range_doppler = float(w.center_frequency / w.slope)
+        # Secondary angle peaks: above the array's sidelobes and above the beam noise
+        # (exponential beam power; about one independent beam per unique element).
+        dg = self.detection_grid
+        self._angle_floor = float(np.log(dg.num_elements / s.angle_pfa))
+        self._angle_dynamic = 10.0 ** (-s.angle_dynamic_range_db / 10)
+        self._alias_margin = 10.0 ** (-s.alias_margin_db / 10)
+        self._visible_az = np.abs(dg.az_sines) <= 1.0
+        rows_el, row_idx = np.unique(dg.el_pos, return_inverse=True)
+        self._row_of = np.eye(rows_el.size, dtype=np.complex64)[row_idx]         # (M, rows)
+        self._row_steer = np.exp(1j * np.pi * dg.rho * dg.elevation_sign * rows_el[:, None]
+                                 * dg.el_sines[None, :]).astype(np.complex64)
+        _, counts = np.unique(dg.el_pos, return_counts=True)
+        self._row_noise = float(dg.num_elements / counts.max())
+        tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        self._near = NearField(tx - c_true, rx - c_true,
+                               2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT)
+        # The last processed range bin: a tone within half a bin of it gives at most this
+        # power ratio to the bin before (window main lobe); beyond it, more.
+        self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
 
     # ------------------------------------------------------------------ cubes
     def _check(self, adc: np.ndarray) -> np.ndarray:
@@ -373,12 +477,14 @@ class RadarProcessor:
                               f"{adc.dtype} {adc.shape}")
         return adc
 
-    def _range_cube(self, adc: np.ndarray) -> np.ndarray:
+    def _range_cube(self, adc: np.ndarray, extra: bool = False) -> np.ndarray:
         """Calibrated range FFT ``(tx, rx, chirp, range)``; chirps carry the Doppler window and
-        the ``(−1)^c`` of the Doppler shift."""
+        the ``(−1)^c`` of the Doppler shift. ``extra``: one range bin more than
+        ``num_range_bins`` where the FFT has it (detection looks one bin beyond the last)."""
         x = self._check(adc)
+        keep = min(self.num_range_bins + int(extra), self.range_fft_size)
         if self._engine == "numba":
-            return self._range_cube_compiled(x)
+            return self._range_cube_compiled(x, keep)
         y = x - self._coupling if self._coupling is not None else x.astype(np.complex64)
         if y.dtype != np.complex64:
             y = y.astype(np.complex64)
@@ -387,9 +493,9 @@ class RadarProcessor:
         y *= self._mult
         out = sfft.fft(y, n=self.range_fft_size, axis=-1, workers=self.settings.workers,
                        overwrite_x=True)
-        return out[..., : self.num_range_bins]
+        return out[..., :keep]
 
-    def _range_cube_compiled(self, x: np.ndarray,
+    def _range_cube_compiled(self, x: np.ndarray, keep: int,
                              channels: np.ndarray | None = None) -> np.ndarray:
         """:meth:`_range_cube` with coupling, DC removal, calibration and windows in one
         compiled pass (same result to float32 rounding). With ``channels`` (flat
@@ -407,7 +513,7 @@ class RadarProcessor:
                        self._gain.view(np.float32), self._chirp_weight,
                        bool(self.settings.dc_removal), y.view(np.float32))
         out = sfft.fft(y, axis=-1, workers=self.settings.workers, overwrite_x=True)
-        out = out[..., : self.num_range_bins]
+        out = out[..., :keep]
         return out.reshape(ntx, nrx, nc, -1) if channels is None else out
 
     def _doppler(self, rcube: np.ndarray) -> np.ndarray:
@@ -473,7 +579,7 @@ class RadarProcessor:
             tdm = None if self._tdm is None else self._tdm[used // nrx, 0]   # (K, nd, 1)
             self._read_channels = used, element_channel, tdm
         used, element_channel, tdm = self._read_channels
-        rc = self._range_cube_compiled(self._check(adc), used)         # (K, chirp, range)
+        rc = self._range_cube_compiled(self._check(adc), self.num_range_bins, used)  # (K, chirp, range)
         v = sfft.fft(rc, n=self.doppler_fft_size, axis=1, workers=self.settings.workers)
         if self.doppler_fft_size % 2:
             v = sfft.fftshift(v, axes=1)
@@ -508,7 +614,7 @@ class RadarProcessor:
         hyps = self._aliases
         if hyps.size < 2:
             return self._heatmap(rd)
-        stat, _, looks = self._detection_map(rd)
+        stat, _, looks, _ = self._detection_map(rd)
         mask, _ = self._cfar_mask(stat, looks)
         d, r = np.nonzero(mask)
         if d.size == 0:
@@ -550,25 +656,45 @@ class RadarProcessor:
         -------
         Detections
         """
-        rcube = self._range_cube(adc)
-        return self._detect(rcube, self._doppler(rcube))
+        rcube = self._range_cube(adc, extra=True)
+        nr = self.num_range_bins
+        return self._detect(rcube[..., :nr], self._doppler(rcube[..., :nr]),
+                            self._doppler(rcube[..., nr:]))
 
-    def _detection_map(self, rd: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), and
-        the looks the CFAR threshold is computed for (``noise_weighting``)."""
+    def _detection_map(self, rd: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
+        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), the
+        looks the CFAR threshold is computed for (``noise_weighting``), and the channels'
+        noise powers (float64 ``(tx·rx,)``; None without whitening)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
         mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
         np.square(mag2, out=mag2)
         plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
-            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks
+            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks, None
         # Inverse-noise weights: each term a unit exponential times the mean noise power, so
         # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
                              int(np.ceil(s.min_range / self.range_bin_width)))
         wts = (sig2.mean() / sig2).astype(np.float32)
-        return (wts @ mag2).reshape(nd, nr).astype(np.float64), plain, self._looks
+        stat = (wts @ mag2).reshape(nd, nr).astype(np.float64)
+        if self._uncoupled is not None:
+            z = nd // 2
+            keep = ~self._uncoupled
+            row = wts[keep] @ mag2.reshape(ntx * nrx, nd, nr)[keep, z, :]
+            stat[z] = row * (wts.sum() / wts[keep].sum())
+        return stat, plain, self._looks, sig2
+
+    def _exclude_row(self, weighted: np.ndarray, nd: int) -> np.ndarray:
+        """Detection statistic ``(doppler,)`` of one range bin from weighted channel powers
+        ``(channels, doppler)``, the zero-Doppler bin without the channels of unknown
+        coupling (as :meth:`_detection_map`)."""
+        out = weighted.sum(axis=0).astype(np.float64)
+        if self._uncoupled is not None:
+            keep = ~self._uncoupled
+            out[nd // 2] = weighted[keep, nd // 2].sum() * (weighted.shape[0] / keep.sum())
+        return out
 
     def _cfar_mask(self, stat: np.ndarray, looks: int) -> tuple[np.ndarray, np.ndarray]:
         """CFAR on the detection statistic: bool mask and noise estimate, ``(doppler, range)``
@@ -589,27 +715,48 @@ class RadarProcessor:
         noise[:, r0:] = res.noise
         return mask, noise
 
-    def _detect(self, rcube: np.ndarray, rd: np.ndarray) -> Detections:
+    def _detect(self, rcube: np.ndarray, rd: np.ndarray, rd_next: np.ndarray | None = None
+                ) -> Detections:
+        """Detections of a range–Doppler cube; ``rd_next`` (tx, rx, doppler, 1 or 0): the range
+        bin after the last one, when computed (a return beyond the processed range then makes
+        no local maximum at the last bin)."""
         s = self.settings
-        stat, plain, looks = self._detection_map(rd)
-        modes: tuple[CFAREdge, CFAREdge] = ("wrap", "mirror")   # (Doppler, range)
+        stat, plain, looks, sig2 = self._detection_map(rd)
+        nxt = None
+        if rd_next is not None and rd_next.shape[-1]:
+            m2 = np.square(np.abs(rd_next[..., 0])).reshape(-1, rd_next.shape[2])
+            wts = (np.ones(m2.shape[0]) if sig2 is None else sig2.mean() / sig2)
+            nxt = self._exclude_row(wts[:, None] * m2, rd_next.shape[2])
         mask, noise = self._cfar_mask(stat, looks)
-        if s.peak_grouping:
-            mask &= local_maxima(stat, modes)
-        d, r = np.nonzero(mask)
-        if s.sidelobe_guard and d.size > 1:
-            # Candidates inside min_range still explain sidelobes, so the cut comes after.
-            keep = sidelobe_mask(d, r, stat[d, r], stat[d, r] - noise[d, r], self._env_d,
-                                 self._env_r, stat.shape[0], 10.0 ** (s.sidelobe_margin_db / 10))
-            d, r = d[keep], r[keep]
-        near = r < int(np.ceil(s.min_range / self.range_bin_width))
-        d, r = d[~near], r[~near]
         nd, nr = stat.shape
+        if s.peak_grouping:
+            # Cells that peak along Doppler or along range: a target one bin from a stronger
+            # one (in the other axis) is no 2D maximum of the summed power, but it is one of
+            # its own beam; the beam test below decides (docs/dsp.md, "Grouping").
+            along_d = (stat >= np.roll(stat, 1, axis=0)) & (stat >= np.roll(stat, -1, axis=0))
+            up = np.empty_like(stat)
+            up[:, :-1] = stat[:, 1:]
+            up[:, -1] = -np.inf if nxt is None else nxt
+            down = np.empty_like(stat)
+            down[:, 1:] = stat[:, :-1]
+            down[:, 0] = -np.inf
+            along_r = (stat >= up) & (stat >= down)
+            peaks = mask & along_d & along_r & local_maxima(stat, ("wrap", "mirror"))
+            if nxt is not None:
+                peaks &= stat >= up
+            # Cells that peak along one axis only are examined beside a strong 2D peak (a
+            # target one bin from a stronger one); elsewhere they would add noise crossings.
+            strong = peaks & (stat >= STRONG_NEIGHBOUR * noise)
+            beside = maximum_filter(strong, size=3, mode=("wrap", "nearest"))
+            mask = peaks | (mask & (along_d | along_r) & beside)
+        d, r = np.nonzero(mask)
+        near = r < int(np.ceil(s.min_range / self.range_bin_width))
+        # Cells inside min_range still explain sidelobes (guard below); they make no points.
+        exp_d, exp_r = d, r
+        exp_pow, exp_excess = stat[d, r], stat[d, r] - noise[d, r]
+        d, r = d[~near], r[~near]
         d_ref = refine_peak(np.stack([stat[(d - 1) % nd, r], stat[d, r],
                                       stat[(d + 1) % nd, r]], axis=1), d, nd, wrap=True)
-        r_ref = refine_peak(np.stack([stat[d, np.maximum(r - 1, 0)], stat[d, r],
-                                      stat[d, np.minimum(r + 1, nr - 1)]], axis=1),
-                            r, nr, wrap=False)
         k_signed = d_ref - nd // 2
         ntx = rd.shape[0]
         vecs = rd[:, :, d, r]                                           # (tx, rx, K)
@@ -619,8 +766,8 @@ class RadarProcessor:
         alias, spec = self._choose_alias(vecs, k_signed)
         if alias is not None:
             vecs = vecs * alias_phase(ntx, alias)[:, None, :]
+        vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T  # (K, M)
         if s.angle_method == "capon" and d.size:
-            vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
             snaps = rcube[:, :, :, r]                                    # (tx, rx, chirp, K)
             if self._tdm is not None:
                 ph = tdm_phase(ntx, k_signed, nd)
@@ -630,29 +777,325 @@ class RadarProcessor:
             snaps = combine_channels(snaps, self.calib.antenna.virtual, s.overlap)
             spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
                                   s.capon_loading, workers=s.workers)
-        elif spec is None:
-            vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T
-            spec = bartlett_spectrum(self.detection_grid, vectors, workers=s.workers)
-        uy, uz, peak = self._peak_directions(spec)
-        if s.beam_doppler and d.size:
-            d_ref = self._beam_doppler(rd, d, r, alias, uy, uz)
-            k_signed = d_ref - nd // 2
-        rng = r_ref * self.range_bin_width
+        # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
+        # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
+        beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
+        floor = self._angle_floor * beam_noise
+        rho_cell = np.maximum(r, 1) * self.range_bin_width
+        rel = self._angle_dynamic if s.multi_peak else np.inf
+        if s.angle_method == "fft":
+            # Sources and their azimuths from the filled row (the noise floor of a row beam
+            # is M/M_row times that of the full beam), each elevation from the rows' sums.
+            prof = row_profile(self.detection_grid, vectors, workers=s.workers)
+            prof = np.where(self._visible_az[None], prof, 0.0)
+            ci, ia = azimuth_peaks(prof, rel, floor * self._row_noise if s.multi_peak
+                                   else np.full(d.size, np.inf))
+            na = self.detection_grid.num_az
+            fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
+                                       prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
+            uy = 2.0 * (fa - na // 2) / (na * self.detection_grid.rho)
+            uz, peak = self._elevation_search(vectors[ci], uy, rho_cell[ci])
+        else:
+            if spec is None:
+                g = self.detection_grid
+                spec = np.zeros((0, g.num_el, g.num_az))
+            masked = np.where(self._visible[None], spec, 0.0)
+            ci, ia = azimuth_peaks(masked.max(axis=1), rel, floor if s.multi_peak
+                                   else np.full(d.size, np.inf))
+            ie = masked[ci, :, ia].argmax(axis=1)
+            uy, uz, peak = self._peak_directions(spec, ci, ie, ia)
+        rho = rho_cell[ci]
+        x = vectors[ci]                                                 # (P, M)
+        uy, uz, peak, steer, ci = self._resolve_peaks(x, ci, uy, uz, peak, rho, floor)
+        pd, pr = d[ci], r[ci]
+        palias = alias[ci] if alias is not None else None
+        # Beam of the 3×3 range–Doppler neighbourhood at each point's direction.
+        nb = self._beam_neighbourhood(rd, pd, pr, palias, steer, rd_next)  # (P, 3, 3)
+        keep = np.ones(ci.size, dtype=bool)
+        if s.peak_grouping and ci.size:
+            # A point is a maximum of its own beam over its neighbours: a target one bin from
+            # a stronger one in another direction stays, the skirt of one target goes.
+            centre = nb[:, 1, 1]
+            keep &= np.all(nb.reshape(-1, 9) <= centre[:, None] * (1 + 1e-6), axis=1)
+        if nr > 1 and ci.size and nxt is None:
+            # A return beyond the last processed bin leaks into it with a slope no target
+            # inside (within half a bin of it) can make.
+            last = pr == nr - 1
+            keep &= ~(last & (nb[:, 1, 1] > self._edge_ratio * nb[:, 1, 0]))
+        if s.sidelobe_guard and ci.size and exp_d.size > 1:
+            # (beam power above the level a noise peak reaches: the direction is a maximum)
+            keep &= self._guard(rd, pd, pr, palias, steer, nb[:, 1, 1] - floor[ci], floor[ci],
+                                stat[pd, pr] - noise[pd, pr], exp_d, exp_r, exp_pow,
+                                exp_excess, stat[pd, pr])
+        ci, pd, pr, uy, uz, peak, nb = ci[keep], pd[keep], pr[keep], uy[keep], uz[keep], \
+            peak[keep], nb[keep]
+        steer = steer[:, keep]
+        palias = palias[keep] if palias is not None else None
+        r_ref = refine_peak(nb[:, 1, :], pr, nr, wrap=False)
+        if s.beam_doppler:
+            dref = refine_peak(nb[:, :, 1], pd, nd, wrap=True)
+        else:
+            dref = d_ref[ci]
+        k_true = dref - nd // 2 + (palias * nd if palias is not None else 0)
+        rate = k_true * (self.velocities[1] - self.velocities[0])
+        # Range–Doppler coupling: the Doppler shift within a chirp raises the beat frequency
+        # by 2·f_c·v/c, which the range FFT reads as f_c·v/S of range.
+        rng_c = r_ref * self.range_bin_width - rate * self._range_doppler
         unit = sines_to_unit(uy, uz)
-        xyz = rng[:, None] * unit
-        k_true = k_signed + (alias * nd if alias is not None else 0)
+        # Range and direction are measured from the virtual array's phase centre.
+        xyz = self._centre[None, :] + rng_c[:, None] * unit
+        rng = np.linalg.norm(xyz, axis=1)
         flat = plain.reshape(nd, nr)
         return Detections(
-            range_bin=r.astype(np.int64), doppler_bin=d.astype(np.int64), range=rng,
-            range_rate=k_true * (self.velocities[1] - self.velocities[0]),
-            azimuth=np.arctan2(unit[:, 1], unit[:, 0]), elevation=np.arcsin(unit[:, 2]),
-            xyz=xyz, intensity=peak, power=flat[d, r].astype(np.float64),
-            snr=stat[d, r] / noise[d, r], alias=alias)
+            range_bin=pr.astype(np.int64), doppler_bin=pd.astype(np.int64), range=rng,
+            range_rate=rate, azimuth=np.arctan2(xyz[:, 1], xyz[:, 0]),
+            elevation=np.arcsin(np.clip(xyz[:, 2] / np.maximum(rng, 1e-12), -1.0, 1.0)),
+            xyz=xyz, intensity=peak, power=flat[pd, pr].astype(np.float64),
+            snr=stat[pd, pr] / noise[pd, pr], alias=palias)
+
+    def _steer(self, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray) -> np.ndarray:
+        """Beam weights ``(M, P)`` complex64 at direction sines ``(u_y, u_z)``, focused at range
+        ``rho`` from the phase centre: ``B(u) = Σ_m x_m w_m / M`` is ``s`` for a source
+        ``s`` at ``(rho, u)``."""
+        w = steering(self.detection_grid, uy, uz)
+        if self.settings.near_field:
+            w = w * self._near.focus(sines_to_unit(uy, uz), rho)
+        return w
+
+    def _resolve_peaks(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray, uz: np.ndarray,
+                       peak: np.ndarray, rho: np.ndarray, floor: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Refine the spectrum peaks and decide which secondary peaks are sources.
+
+        ``x`` complex ``(P, M)``: the vector of each peak's cell; ``ci`` the cell of each peak,
+        the strongest of each cell first. The strongest peak of a cell is refined by Newton
+        steps on the focused beam. A secondary peak counts when, with the strongest source's
+        response removed (its amplitude times the array's focused cross pattern), what is
+        left in its direction is above the cell's noise ``floor`` and within
+        ``angle_dynamic_range_db`` of the strongest: sidelobes of the strongest vanish there,
+        a second scatterer does not. Cells with several sources are refined jointly (each
+        source's direction on the vector less the others' least-squares fit).
+
+        Returns
+        -------
+        tuple
+            ``(u_y, u_z, power, weights, ci)`` of the kept peaks; ``weights`` ``(M, P)`` as
+            :meth:`_steer`.
+        """
+        s = self.settings
+        g = self.detection_grid
+        m = float(g.num_elements)
+        step = (2.0 / (g.num_az * g.rho), 2.0 / (g.num_el * g.rho))
+        refine = s.angle_refine and s.angle_method == "fft"
+
+        def newton(xv: np.ndarray, uy0: np.ndarray, uz0: np.ndarray, rr: np.ndarray):
+            if not self.settings.near_field:
+                return newton_refine(g, xv, uy0, uz0, step)
+            f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
+            return newton_refine(g, xv * f, uy0, uz0, step)
+
+        primary = np.ones(ci.size, dtype=bool)
+        primary[1:] = ci[1:] != ci[:-1]
+        if refine and primary.any():
+            uy[primary], uz[primary], peak[primary] = newton(x[primary], uy[primary],
+                                                             uz[primary], rho[primary])
+        w = self._steer(uy, uz, rho)                                    # (M, P)
+        if primary.all():
+            return uy, uz, peak, w, ci
+        # amplitude of each cell's strongest source and its response in the other directions
+        first = np.flatnonzero(primary)[np.cumsum(primary) - 1]        # primary peak of each
+        amp = np.einsum("pm,mp->p", x, w) / m
+        sec = ~primary
+        cross = np.einsum("mp,mp->p", np.conj(w[:, first[sec]]), w[:, sec]) / m
+        resid = np.abs(amp[sec] - amp[first[sec]] * cross) ** 2
+        ok = np.ones(ci.size, dtype=bool)
+        ok[sec] = (resid >= floor[ci[sec]]) & (
+            resid >= np.abs(amp[first[sec]]) ** 2 * self._angle_dynamic)
+        uy, uz, peak, w, ci, x, rho = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok], x[ok],
+                                       rho[ok])
+        # Joint least-squares amplitudes of each cell's remaining sources (sidelobes of a
+        # second source get little of it), then each source refined on its cell's vector
+        # less the others' fit; all batched over cells (at most MAX_SOURCES per cell).
+        _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+        if count.max() < 2:
+            return uy, uz, peak, w, ci
+        rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
+        keep = rank < MAX_SOURCES
+        uy, uz, peak, w, ci, x, rho, rank, cell_of = (
+            uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep], x[keep], rho[keep],
+            rank[keep], cell_of[keep])
+        for _ in range(2):
+            amps = self._joint_amplitudes(x, w, cell_of, rank)
+            pw = np.abs(amps) ** 2
+            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            top = np.maximum.reduceat(pw, starts)
+            ok = (pw >= floor[ci]) & (pw >= top[cell_of] * self._angle_dynamic)
+            ok[rank == 0] = True
+            uy, uz, peak, w, ci, x, rho, amps = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok],
+                                                 x[ok], rho[ok], amps[ok])
+            _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+            rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
+            multi = count[cell_of] > 1
+            if not multi.any():
+                break
+            amps = self._joint_amplitudes(x, w, cell_of, rank)
+            model = np.conj(w) * amps[None, :]                          # (M, P) fitted sources
+            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            total = np.add.reduceat(model.T, starts, axis=0)            # peaks grouped by cell
+            xp = (x - total[cell_of] + model.T)[multi]                  # vector less the others
+            j = np.flatnonzero(multi)
+            # elevation afresh on what is left (two sources fool the sparse rows)
+            uz[j], _ = self._elevation_search(xp, uy[j], rho[j])
+            if refine:
+                uy[j], uz[j], _ = newton(xp, uy[j], uz[j], rho[j])
+            w[:, j] = self._steer(uy[j], uz[j], rho[j])
+        amps = self._joint_amplitudes(x, w, cell_of, rank)
+        multi = count[cell_of] > 1
+        peak[multi] = np.abs(amps[multi]) ** 2
+        return uy, uz, peak, w, ci
+
+    def _elevation_search(self, x: np.ndarray, uy: np.ndarray, rho: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """Elevation sine of the strongest beam of each vector ``x`` ``(P, M)`` along its
+        azimuth ``uy``, and that beam's power: the elements are steered in azimuth and summed
+        per elevation row, then the few rows are beamformed over the detection grid's
+        elevation bins; the peak is refined by a log-parabola (Newton steps follow)."""
+        g = self.detection_grid
+        if x.shape[0] == 0:
+            return np.zeros(0), np.zeros(0)
+        wa = self._steer(uy, np.zeros(uy.size), rho)                   # (M, P)
+        # (einsum, not BLAS: threaded BLAS sums in an order that varies between runs, and
+        # batch processing promises the bytes of serial processing)
+        rows = np.einsum("pm,pm,mr->pr", x, wa.T, self._row_of)          # (P, rows)
+        bz = np.abs(np.einsum("pr,re->pe", rows, self._row_steer)) ** 2  # (P, n_el)
+        vis = uy[:, None] ** 2 + g.el_sines[None, :] ** 2 <= 1.0
+        bz = np.where(vis, bz, 0.0)
+        ie = np.argmax(bz, axis=1)
+        ne = g.num_el
+        k = np.arange(ie.size)
+        fe = refine_peak(np.stack([bz[k, (ie - 1) % ne], bz[k, ie], bz[k, (ie + 1) % ne]],
+                                  axis=1), ie, ne, wrap=True)
+        uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
+        return uz, bz[k, ie] / float(g.num_elements) ** 2
+
+    @staticmethod
+    def _joint_amplitudes(x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
+                          rank: np.ndarray) -> np.ndarray:
+        """Least-squares amplitudes of every cell's sources, batched: the sources of a cell
+        are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak. A cell
+        with one source gets its beam value; only cells with several are solved."""
+        out = np.einsum("pm,mp->p", x, w) / float(w.shape[0])
+        counts = np.bincount(cell_of)
+        multi = counts[cell_of] > 1
+        if not multi.any():
+            return out
+        x, w, rank = x[multi], w[:, multi], rank[multi]
+        _, cell_of = np.unique(cell_of[multi], return_inverse=True)
+        ncell = int(cell_of.max()) + 1
+        nmax = int(rank.max()) + 1
+        m = w.shape[0]
+        a = np.zeros((ncell, m, nmax), dtype=np.complex128)
+        a[cell_of, :, rank] = np.conj(w.T)
+        xc = np.zeros((ncell, m), dtype=np.complex128)
+        xc[cell_of] = x
+        gram = np.einsum("cmi,cmj->cij", np.conj(a), a)                 # (C, n, n)
+        used = np.zeros((ncell, nmax), dtype=bool)
+        used[cell_of, rank] = True
+        idx = np.arange(nmax)
+        gram[:, idx, idx] += np.where(used, 0.0, 1.0)                   # padded columns
+        rhs = np.einsum("cmn,cm->cn", np.conj(a), xc)
+        sol = np.linalg.solve(gram, rhs[..., None])[..., 0]
+        out[multi] = sol[cell_of, rank]
+        return out
+
+    def _beam_noise_factor(self, sig2: np.ndarray | None) -> float:
+        """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""
+        m = self.detection_grid.num_elements
+        if sig2 is None:
+            return 1.0 / (m * self._looks)
+        first = self.calib.antenna.virtual.first_pair
+        nrx = self.calib.antenna.num_rx
+        used = sig2[first[:, 0] * nrx + first[:, 1]]
+        return float(used.sum() / (m * m * sig2.sum()))
+
+    def _beam_neighbourhood(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
+                            alias: np.ndarray | None, steer: np.ndarray,
+                            rd_next: np.ndarray | None = None) -> np.ndarray:
+        """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
+        around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
+
+        Each Doppler bin keeps its own TDM compensation (across the Doppler edge that of the
+        unwrapped neighbour) and the point's alias; range neighbours beyond the map repeat
+        the edge cell.
+        """
+        ntx, _, nd, nr = rd.shape
+        p = d.size
+        out = np.zeros((p, 3, 3))
+        if p == 0:
+            return out
+        m2 = float(self.detection_grid.num_elements) ** 2
+        for i, j in enumerate((-1, 0, 1)):
+            dn = (d + j) % nd
+            ph = None
+            if self._tdm is not None:
+                ph = tdm_phase(ntx, (d + j - dn).astype(np.float64), nd)
+            if alias is not None:
+                a = alias_phase(ntx, alias)
+                ph = a if ph is None else ph * a
+            for k, jr in enumerate((-1, 0, 1)):
+                rn = np.clip(r + jr, 0, nr - 1)
+                v = rd[:, :, dn, rn]
+                if jr == 1 and rd_next is not None and rd_next.shape[-1]:
+                    beyond = r + 1 >= nr
+                    v = np.where(beyond[None, None, :], rd_next[:, :, dn, 0], v)
+                if ph is not None:
+                    v = v * ph[:, None, :]
+                el = combine_channels(v, self.calib.antenna.virtual, self.settings.overlap)
+                out[:, i, k] = np.abs(np.einsum("mp,mp->p", el, steer)) ** 2 / m2
+        return out
+
+    def _guard(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray, alias: np.ndarray | None,
+               steer: np.ndarray, beam_excess: np.ndarray, beam_floor: np.ndarray,
+               cell_excess: np.ndarray, exp_d: np.ndarray, exp_r: np.ndarray,
+               exp_pow: np.ndarray, exp_excess: np.ndarray, cell_pow: np.ndarray
+               ) -> np.ndarray:
+        """Sidelobe guard on points: True = keep.
+
+        First on the summed power (:func:`~coloradar.dsp.detect.sidelobe_pairs`): which
+        stronger cells, two or more bins away, could explain a point's cell by the windows'
+        worst-case leakage. Then per such pair in the point's own direction: leakage of cell
+        ``j`` into the point's cell is ``E_d·E_r`` times ``j``'s beam, so the point stays
+        when its beam power above the noise exceeds the margin times ``E_d·E_r·B_j(u)``;
+        a weaker target in another direction is then kept beside a strong one.
+        """
+        s = self.settings
+        margin = 10.0 ** (s.sidelobe_margin_db / 10)
+        pi, pj, leak = sidelobe_pairs(d, r, cell_pow, cell_excess, exp_d, exp_r, exp_pow,
+                                      self._env_d, self._env_r, rd.shape[2], margin)
+        keep = np.ones(d.size, dtype=bool)
+        if pi.size == 0:
+            return keep
+        ntx = rd.shape[0]
+        jd, jr = exp_d[pj], exp_r[pj]
+        v = rd[:, :, jd, jr]
+        if alias is not None:
+            v = v * alias_phase(ntx, alias[pi])[:, None, :]
+        el = combine_channels(v, self.calib.antenna.virtual, s.overlap)
+        bj = np.abs(np.einsum("mp,mp->p", el, steer[:, pi])) ** 2 / float(
+            self.detection_grid.num_elements) ** 2
+        # Only a point outside cell j's main lobe is rescued by its direction (there the beam
+        # of j has fallen below half its peak, which is at most j's mean element power).
+        peak_j = np.mean(np.abs(el) ** 2, axis=0)
+        # and only when it stands clear of the noise (twice the level a noise peak reaches)
+        explained = ((beam_excess[pi] < margin * leak * bj) | (bj >= 0.5 * peak_j)
+                     | (beam_excess[pi] < beam_floor[pi]))
+        keep[pi[explained]] = False
+        return keep
 
     def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`) and, when it was scored
-        by the angle spectrum, the Bartlett spectra of the winners.
+        """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`); the second value is
+        None (kept for callers).
 
         ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``.
         Returns ``(None, None)`` when the search is off.
@@ -672,73 +1115,41 @@ class RadarProcessor:
             g = self.detection_grid
             ph = alias_phase(ntx, hyps)                                        # (tx, H)
             score = np.empty((k, hyps.size))
-            spectra = np.empty((k, g.num_el, g.num_az), dtype=np.float32)
-            step = 256                                  # bounds the (K·H, el, az) spectra
+            step = 1024
             for k0 in range(0, k, step):
                 ks = slice(k0, min(k, k0 + step))
                 kk = ks.stop - k0
                 cand = vecs[:, :, ks, None] * ph[:, None, None, :]             # (tx, rx, k, H)
                 el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
-                spec = bartlett_spectrum(g, el.reshape(el.shape[0], kk * hyps.size).T,
-                                         workers=self.settings.workers)
-                vis = np.where(self._visible[None], spec, 0.0)
-                sc = vis.reshape(kk, hyps.size, g.num_el * g.num_az).max(axis=2)
+                # Beam of the filled azimuth row: a wrong hypothesis puts a phase step
+                # between the TX blocks along it and defocuses it (no elevation ghosts).
+                prof = row_profile(g, el.reshape(el.shape[0], kk * hyps.size).T,
+                                   workers=self.settings.workers)
+                prof = np.where(self._visible_az[None], prof, 0.0)
+                sc = prof.reshape(kk, hyps.size, g.num_az).max(axis=2)
+                # Two sources in one cell can make a wrong hypothesis' beam peak a little
+                # higher than the right one's (a wrong one defocuses a lone source by
+                # several dB): the folded hypothesis keeps a small margin.
+                sc = np.where(hyps[None, :] == 0, sc, sc * self._alias_margin)
                 sc = np.where(allowed[ks], sc, -np.inf)
                 score[ks] = sc
-                spectra[ks] = spec.reshape(kk, hyps.size, g.num_el, g.num_az)[
-                    np.arange(kk), np.argmax(sc, axis=1)]
         score = np.where(allowed, score, -np.inf)
         best = np.argmax(score, axis=1) if k else np.zeros(0, dtype=np.int64)
         return hyps[best], spectra
 
-    def _beam_doppler(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
-                      alias: np.ndarray | None, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
-        """Sub-bin Doppler of each detection from the beam steered at its direction.
-
-        The power map sums all directions, so a cell of an extended surface (floor, wall) mixes
-        scatterers of many range rates, and its Doppler peak is pulled off the range rate of
-        the direction the angle spectrum found (docs/dsp.md, "Beam-steered Doppler"). The
-        beam at that direction keeps only its neighbourhood. Returns float64 ``(K,)``
-        refined Doppler bins, as the power-map refinement.
-        """
-        ntx = rd.shape[0]
-        nd = rd.shape[2]
+    def _peak_directions(self, spec: np.ndarray, k: np.ndarray, ie: np.ndarray, ia: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Direction sines of spectrum peaks ``(k, ie, ia)`` refined by log-parabolas along
+        both axes of the ``(K, el, az)`` spectra, and the peak values."""
         g = self.detection_grid
-        cols = []
-        for j in (-1, 0, 1):
-            dn = (d + j) % nd
-            v = rd[:, :, dn, r]
-            if self._tdm is not None:
-                # rd holds the compensation of the wrapped bin dn; a neighbour across the
-                # edge needs that of d + j, one Doppler period (one alias) away.
-                v = v * tdm_phase(ntx, (d + j - dn).astype(np.float64), nd)[:, None, :]
-            if alias is not None:
-                v = v * alias_phase(ntx, alias)[:, None, :]
-            cols.append(combine_channels(v, self.calib.antenna.virtual, self.settings.overlap))
-        # The Bartlett beam at the refined sines: the angle grid's FFT evaluated off-grid,
-        # Σ_m x_m exp(jπρ(s_az·p_az,m·u_y + s_el·p_el,m·u_z)) over unique elements m.
-        phase = np.pi * g.rho * (g.azimuth_sign * g.az_pos[:, None] * uy[None, :]
-                                 + g.elevation_sign * g.el_pos[:, None] * uz[None, :])
-        steer = np.exp(1j * phase).astype(np.complex64)                    # (M, K)
-        p3 = np.stack([np.abs(np.sum(c * steer, axis=0)) ** 2 for c in cols], axis=1)
-        return refine_peak(p3, d, nd, wrap=True)
-
-    def _peak_directions(self, spec: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Sub-bin peak direction sines and peak value of ``(K, el, az)`` spectra."""
-        g = self.detection_grid
-        k = spec.shape[0]
-        masked = np.where(self._visible[None], spec, 0.0)
-        flat = masked.reshape(k, g.num_el * g.num_az).argmax(axis=1) if k else np.zeros(0, int)
-        ie, ia = np.divmod(flat, g.num_az)
-        kk = np.arange(k)
         ne, na = g.num_el, g.num_az
-        fe = refine_peak(np.stack([spec[kk, (ie - 1) % ne, ia], spec[kk, ie, ia],
-                                   spec[kk, (ie + 1) % ne, ia]], axis=1), ie, ne, wrap=True)
-        fa = refine_peak(np.stack([spec[kk, ie, (ia - 1) % na], spec[kk, ie, ia],
-                                   spec[kk, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
+        fe = refine_peak(np.stack([spec[k, (ie - 1) % ne, ia], spec[k, ie, ia],
+                                   spec[k, (ie + 1) % ne, ia]], axis=1), ie, ne, wrap=True)
+        fa = refine_peak(np.stack([spec[k, ie, (ia - 1) % na], spec[k, ie, ia],
+                                   spec[k, ie, (ia + 1) % na]], axis=1), ia, na, wrap=True)
         uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
         uy = 2.0 * (fa - na // 2) / (na * g.rho)
-        return uy, uz, spec[kk, ie, ia].astype(np.float64)
+        return uy, uz, spec[k, ie, ia].astype(np.float64)
 
     def pointcloud(self, adc: np.ndarray) -> np.ndarray:
         """Point cloud of one frame, float32 ``(N, 5)``: ``x y z intensity range_rate``."""
@@ -753,9 +1164,11 @@ class RadarProcessor:
         tuple
             ``(heatmap or None, pointcloud or None)`` as :meth:`heatmap` and :meth:`pointcloud`.
         """
-        rcube = self._range_cube(adc)
-        rd = self._doppler(rcube)
-        pts = self._detect(rcube, rd).pointcloud() if pointcloud else None
+        nr = self.num_range_bins
+        rcube = self._range_cube(adc, extra=pointcloud)
+        rd = self._doppler(rcube[..., :nr])
+        pts = (self._detect(rcube[..., :nr], rd, self._doppler(rcube[..., nr:])).pointcloud()
+               if pointcloud else None)
         if not heatmap:
             return None, pts
         return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
@@ -771,3 +1184,15 @@ def _power_sum(cube: np.ndarray) -> np.ndarray:
     mag = np.abs(cube)
     np.square(mag, out=mag)
     return mag.sum(axis=(0, 1))
+
+
+def _edge_ratio(win: np.ndarray, fft_size: int) -> float:
+    """``|W(½)|² / |W(1½)|²``: power of a tone's cell over the next cell when it lies half a
+    bin beyond the cell centre (``W`` the window's DTFT in FFT bins, zero padding included)."""
+    w = np.asarray(win, dtype=np.float64)
+    k = np.arange(w.size)
+
+    def resp(nu: float) -> float:
+        return float(np.abs(np.sum(w * np.exp(-2j * np.pi * nu * k / fft_size))) ** 2)
+
+    return resp(0.5) / max(resp(1.5), 1e-300)

@@ -28,6 +28,7 @@ from .dead_reckoning import (
 from .ego_velocity import (
     EgoVelocity,
     EgoVelocityConfig,
+    VelocityPrior,
     estimate_ego_velocity,
     static_inlier_threshold,
 )
@@ -93,6 +94,7 @@ __all__ = [
     "RioConfig",
     "RioResult",
     "VelocityErrors",
+    "VelocityPrior",
     "absolute_trajectory_error",
     "apply_alignment",
     "associate_trajectories",

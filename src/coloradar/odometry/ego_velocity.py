@@ -35,7 +35,18 @@ against the model before the least-squares step. Speeds above ``v_max`` then wor
 enough static points see a range rate below ``v_max`` to form the minimal sets (points to the
 side of the motion). Point clouds from :class:`coloradar.dsp.RadarProcessor` carry range rates
 already unwrapped by its Doppler alias search (``doppler_unwrap``), and the wrapping leaves
-those alone (a residual within the threshold wraps to itself)."""
+those alone (a residual within the threshold wraps to itself).
+
+**What aliasing leaves ambiguous.** Wrapped residuals make any velocity whose predicted range
+rates differ from the truth's by multiples of ``2·v_max`` at most points fit nearly as well.
+Minimal sets are therefore also solved for the alias shifts of their range rates (speeds up
+to ``max_speed``), so that the right velocity is among the hypotheses even when every range
+rate is folded; and a frame is reported as not ok ("ambiguous") when a second velocity more
+than ``ambiguity_distance`` away explains nearly as much of the cloud (``ambiguity_ratio`` of
+its weighted support and angular coverage). A **velocity prior** (e.g. from an IMU:
+``velocity_prior=VelocityPrior(v, sigma)``) resolves it: range rates are unwrapped towards the
+prior's prediction, hypotheses are kept within its gate, and an estimate that leaves the gate is
+not ok."""
 
 from __future__ import annotations
 
@@ -45,7 +56,8 @@ import numpy as np
 
 from ..errors import SettingsError
 
-__all__ = ["EgoVelocity", "EgoVelocityConfig", "estimate_ego_velocity", "static_inlier_threshold"]
+__all__ = ["EgoVelocity", "EgoVelocityConfig", "VelocityPrior", "estimate_ego_velocity",
+           "static_inlier_threshold"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +98,18 @@ class EgoVelocityConfig:
         elevation is too coarse to observe ``v_z`` (the single chip's point clouds) on a rig
         moving on a floor. The points keep their measured elevation in ``d_i``; the
         covariance's z row and column are 0 (fixed, not estimated).
+    max_speed
+        Largest sensor speed [m/s] searched when range rates may be aliased
+        (``max_velocity`` given): minimal sets are also solved for the alias shifts of their
+        range rates up to it.
+    min_inlier_fraction
+        The estimate is not ok when its inliers are fewer than this fraction of the usable
+        points: no motion explains the cloud (at high speed, direction errors of a coarse
+        array move range rates beyond the threshold, and a few chance inliers decide).
+    ambiguity_distance, ambiguity_ratio
+        With ``max_velocity`` given, the estimate is not ok when another velocity more than
+        ``ambiguity_distance`` [m/s] away has at least ``ambiguity_ratio`` of its weighted
+        support and angular coverage (aliasing leaves the two indistinguishable).
     """
 
     threshold: float = 0.15
@@ -100,6 +124,10 @@ class EgoVelocityConfig:
     min_spread: float = 0.02
     refine_iterations: int = 10
     planar: bool = False
+    max_speed: float = 10.0
+    ambiguity_distance: float = 0.2
+    ambiguity_ratio: float = 0.8
+    min_inlier_fraction: float = 0.3
 
     def __post_init__(self) -> None:
         if not self.threshold > 0:
@@ -108,6 +136,8 @@ class EgoVelocityConfig:
             raise SettingsError(f"max_velocity must be positive or None, got {self.max_velocity}")
         if self.hypotheses < 1 or self.max_models < 1 or self.min_inliers < 3:
             raise SettingsError("hypotheses and max_models must be >= 1, min_inliers >= 3")
+        if not self.max_speed > 0 or not 0 < self.ambiguity_ratio <= 1:
+            raise SettingsError("max_speed must be positive and ambiguity_ratio in (0, 1]")
 
     @property
     def dims(self) -> int:
@@ -123,6 +153,40 @@ def static_inlier_threshold(velocity_bin_width: float, floor: float = 0.1) -> fl
     bins (single chip: 0.04 m/s), whose error is dominated by angle errors of the direction.
     """
     return max(float(floor), 0.75 * float(velocity_bin_width))
+
+
+@dataclass(frozen=True, eq=False)
+class VelocityPrior:
+    """A prior on the sensor's velocity (from an IMU, a motion model or the last frame).
+
+    Attributes
+    ----------
+    velocity
+        float ``(3,)`` [m/s], sensor frame.
+    sigma
+        Standard deviation [m/s] of each component (scalar or ``(3,)``).
+    gate
+        Estimates farther than ``gate·sigma`` (plus the inlier threshold) from the prior are
+        not searched, and a final estimate outside is not ok.
+    """
+
+    velocity: np.ndarray
+    sigma: float | np.ndarray = 0.5
+    gate: float = 3.0
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.velocity, dtype=np.float64).reshape(-1)
+        if v.size != 3 or not np.all(np.isfinite(v)):
+            raise SettingsError(f"velocity_prior must be 3 finite numbers [m/s], got {v}")
+        sig = np.broadcast_to(np.asarray(self.sigma, dtype=np.float64), (3,))
+        if not np.all(sig > 0) or not self.gate > 0:
+            raise SettingsError("velocity_prior sigma and gate must be positive")
+        object.__setattr__(self, "velocity", v)
+        object.__setattr__(self, "sigma", sig.copy())
+
+    def radius(self, threshold: float) -> np.ndarray:
+        """Half-width of the search box per component [m/s]."""
+        return self.gate * np.asarray(self.sigma) + threshold
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,16 +281,37 @@ def _draw_sets(rng: np.random.Generator, n: int, count: int, k: int) -> np.ndarr
 
 
 def _hypotheses(d: np.ndarray, vr: np.ndarray, rng: np.random.Generator, count: int,
-                k: int) -> np.ndarray:
+                k: int, period: float | None = None, max_speed: float = np.inf) -> np.ndarray:
     """Velocities ``(H, 3)`` solving ``−D_s v = vr_s`` for random minimal sets of ``k`` points
-    (``k = 2``: planar, ``v_z = 0``); singular sets are dropped."""
+    (``k = 2``: planar, ``v_z = 0``); singular sets are dropped.
+
+    With ``period`` (``2·v_max``), each set is also solved for every shift of its range rates
+    by multiples of the period that ``max_speed`` allows (a range rate of a static point is
+    at most the speed), and solutions faster than ``max_speed`` are dropped.
+    """
+    n = 0
+    if period is not None and np.isfinite(max_speed):
+        n = int(np.ceil((max_speed + period / 2) / period))
+        # every set brings up to (2n+1)^k hypotheses: fewer sets keep the total bounded
+        # (32 sets still hold an all-static one with probability > 98 % at half outliers)
+        count = max(32, min(count, 8 * count // (2 * n + 1) ** k))
     idx = _draw_sets(rng, d.shape[0], count, k)
     m = -d[idx][:, :, :k]                                          # (H, k, k)
     # |det| of k unit vectors is the volume they span; tiny ones are (near-)degenerate.
     good = np.abs(np.linalg.det(m)) > 1e-6
-    out = np.zeros((int(good.sum()), 3))
-    if good.any():
-        out[:, :k] = np.linalg.solve(m[good], vr[idx[good]][:, :, None])[:, :, 0]
+    m, rates = m[good], vr[idx[good]]                              # (G, k, k), (G, k)
+    if n and period is not None:
+        grid = np.stack(np.meshgrid(*[np.arange(-n, n + 1)] * k, indexing="ij"), -1).reshape(-1, k)
+        shifted = rates[:, None, :] + period * grid[None]          # (G, S, k)
+        # the true range rate of a static point lies within ±max_speed
+        ok = np.all(np.abs(shifted) <= max_speed + period / 2, axis=2)
+        g_i, s_i = np.nonzero(ok)
+        m, rates = m[g_i], shifted[g_i, s_i]
+    out = np.zeros((m.shape[0], 3))
+    if m.shape[0]:
+        out[:, :k] = np.linalg.solve(m, rates[:, :, None])[:, :, 0]
+    if np.isfinite(max_speed):
+        out = out[np.linalg.norm(out, axis=1) <= max_speed]
     return out
 
 
@@ -238,12 +323,18 @@ def _lstsq(d: np.ndarray, b: np.ndarray, k: int) -> np.ndarray:
 
 def _msac_best(d: np.ndarray, vr: np.ndarray, w: np.ndarray, hyp: np.ndarray, thr: float,
                vmax: float | None, block: int = 1 << 22) -> np.ndarray:
-    """The hypothesis of least weighted MSAC cost ``Σ w_i min(r_i², thr²)``.
+    """The hypothesis of least weighted MSAC cost ``Σ w_i min(r_i², thr²)``."""
+    return hyp[int(np.argmin(_msac_costs(d, vr, w, hyp, thr, vmax, block)))]
+
+
+def _msac_costs(d: np.ndarray, vr: np.ndarray, w: np.ndarray, hyp: np.ndarray, thr: float,
+                vmax: float | None, block: int = 1 << 22) -> np.ndarray:
+    """Weighted MSAC cost ``Σ w_i min(r_i², thr²)`` of every hypothesis, float32 ``(H,)``.
 
     Hypotheses are scored in blocks of ``block / N`` at once (one matrix product each), in
     float32: the cost only ranks hypotheses; the winner is refined in float64.
     """
-    best_cost, best = np.inf, hyp[0]
+    costs = np.empty(hyp.shape[0], dtype=np.float32)
     step = max(1, block // max(1, d.shape[0]))
     # (H, N) layout: the product with the (3, N) transposed directions is a fast BLAS call,
     # unlike (N, 3) @ (3, H) with a strided right operand.
@@ -257,11 +348,8 @@ def _msac_best(d: np.ndarray, vr: np.ndarray, w: np.ndarray, hyp: np.ndarray, th
         res = _wrap(res, None if vmax is None else np.float32(vmax))
         np.square(res, out=res)
         np.minimum(res, thr2, out=res)
-        cost = res @ w32
-        k = int(np.argmin(cost))
-        if cost[k] < best_cost:
-            best_cost, best = float(cost[k]), h[k]
-    return best
+        costs[s:s + step] = res @ w32
+    return costs
 
 
 def _refine(d: np.ndarray, vr: np.ndarray, v: np.ndarray, cfg: EgoVelocityConfig,
@@ -298,7 +386,8 @@ def _cells(d: np.ndarray, cell_deg: float) -> np.ndarray:
 
 def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = None,
                           config: EgoVelocityConfig | None = None, *,
-                          rng: np.random.Generator | int | None = 0) -> EgoVelocity:
+                          rng: np.random.Generator | int | None = 0,
+                          velocity_prior: VelocityPrior | np.ndarray | None = None) -> EgoVelocity:
     """The sensor's own velocity from the range rates of one radar point cloud.
 
     Parameters
@@ -314,13 +403,18 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
     rng
         Generator or seed of the minimal-set draws; the result is a deterministic function of
         the input and the seed.
+    velocity_prior
+        Optional :class:`VelocityPrior` (or a ``(3,)`` velocity [m/s], sigma 0.5 m/s): range
+        rates are unwrapped towards its prediction, the search is kept within its gate, and
+        an estimate outside the gate is not ok.
 
     Returns
     -------
     EgoVelocity
         ``velocity`` is the sensor origin's velocity in the sensor frame [m/s]; ``ok`` is False
         with a ``reason`` when the frame has too few points, no motion with ``min_inliers``
-        support, or degenerate geometry.
+        support, degenerate geometry, an ambiguity that Doppler aliasing leaves (another
+        velocity explains the cloud about as well), or an estimate outside the prior's gate.
 
     Examples
     --------
@@ -342,6 +436,23 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
     sel = np.flatnonzero(valid)
     d = p[sel] / r[sel, None]
     b = vr[sel]
+    prior = (velocity_prior if isinstance(velocity_prior, VelocityPrior) or velocity_prior is None
+             else VelocityPrior(np.asarray(velocity_prior, dtype=np.float64)))
+    period = None if cfg.max_velocity is None else 2.0 * cfg.max_velocity
+    k_dim = cfg.dims
+    if prior is not None and period is not None:
+        # Each range rate to the alias nearest the prior's prediction.
+        b = b + period * np.round((-(d @ prior.velocity) - b) / period)
+
+    def search(dd: np.ndarray, bb: np.ndarray) -> np.ndarray:
+        if prior is None:
+            return _hypotheses(dd, bb, gen, cfg.hypotheses, k_dim, period, cfg.max_speed)
+        h = _hypotheses(dd, bb, gen, cfg.hypotheses, k_dim)
+        rad = prior.radius(cfg.threshold)
+        inside = np.all(np.abs(h - prior.velocity)[:, :k_dim] <= rad[:k_dim], axis=1)
+        return h[inside]
+
+    all_hyp: np.ndarray | None = None
     cells = _cells(d, cfg.cell_deg)
     _, cell_of, per_cell = np.unique(cells, return_inverse=True, return_counts=True)
     # Each angular cell casts one vote in total: a dense, compact moving object must not
@@ -355,7 +466,9 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
         rem = np.flatnonzero(remaining)
         if rem.size < cfg.min_inliers:
             break
-        hyp = _hypotheses(d[rem], b[rem], gen, cfg.hypotheses, cfg.dims)
+        hyp = search(d[rem], b[rem])
+        if all_hyp is None:
+            all_hyp = hyp
         if hyp.shape[0] == 0:
             if not models:
                 return _failed(n_in, n_valid, f"degenerate geometry: every minimal set of "
@@ -397,5 +510,45 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
     if spread < cfg.min_spread:
         ok, reason = False, (f"degenerate geometry: the {n} inlier directions leave one velocity "
                              f"component unobserved (spread {spread:.3g} < {cfg.min_spread:g})")
+    elif n < cfg.min_inlier_fraction * n_valid:
+        ok, reason = False, (f"only {n} of {n_valid} points fit the chosen motion (fewer than "
+                             f"{cfg.min_inlier_fraction:g} of them)")
+    elif prior is not None and np.any(np.abs(v - prior.velocity)[:k]
+                                      > prior.radius(cfg.threshold)[:k]):
+        ok, reason = False, (f"the estimate {np.round(v, 2).tolist()} m/s lies outside the "
+                             f"prior's gate around {np.round(prior.velocity, 2).tolist()} m/s")
+    elif period is not None and all_hyp is not None and all_hyp.shape[0]:
+        alt = _alias_alternative(d, b, weight, all_hyp, v, cfg, inl)
+        if alt is not None:
+            v_alt, w_alt = alt
+            w_best = float(weight[inl].sum())
+            if w_alt >= cfg.ambiguity_ratio * w_best:
+                ok, reason = False, (
+                    f"ambiguous: {np.round(v, 2).tolist()} and {np.round(v_alt, 2).tolist()} m/s "
+                    f"explain the range rates about equally (weighted support {w_best:.1f} and "
+                    f"{w_alt:.1f}; Doppler aliasing at ±{cfg.max_velocity:.2f} m/s); give a "
+                    "velocity_prior")
     return EgoVelocity(v, cov, inliers, n_valid, sigma, spread,
                        int(np.unique(cells[inl]).size), len(models), ok, reason)
+
+
+def _alias_alternative(d: np.ndarray, b: np.ndarray, weight: np.ndarray, hyp: np.ndarray,
+                       v: np.ndarray, cfg: EgoVelocityConfig, inliers: np.ndarray
+                       ) -> tuple[np.ndarray, float] | None:
+    """The best velocity more than ``ambiguity_distance`` from ``v`` and the weighted support
+    it shares with ``v``'s inliers (the same points explained both ways: aliasing; a moving
+    object's motion explains other points and is no ambiguity).
+
+    The hypothesis of least MSAC cost outside that distance is refined like the estimate;
+    None when none exists or it converges back to ``v``.
+    """
+    far = np.linalg.norm(hyp - v, axis=1) > cfg.ambiguity_distance
+    if not far.any():
+        return None
+    cand = hyp[far]
+    costs = _msac_costs(d, b, weight, cand, cfg.threshold, cfg.max_velocity)
+    v_alt, inl_alt, _ = _refine(d, b, cand[int(np.argmin(costs))], cfg,
+                                np.ones(d.shape[0], dtype=bool))
+    if np.linalg.norm(v_alt - v) <= cfg.ambiguity_distance or inl_alt.sum() < cfg.min_inliers:
+        return None
+    return v_alt, float(weight[inl_alt & inliers].sum())
