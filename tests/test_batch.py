@@ -18,7 +18,8 @@ import pytest
 
 from coloradar.batch.driver import process_dataset
 from coloradar.batch.executors import LocalExecutor, TaskError
-from coloradar.batch.manifest import OutputLock, settings_differences, settings_record
+from coloradar.batch.manifest import settings_differences, settings_record
+from coloradar.batch.output_folder import OutputLock
 from coloradar.batch.run_processing import process_run
 from coloradar.calib import load_calibration
 from coloradar.cli.main import main

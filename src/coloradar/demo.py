@@ -168,7 +168,7 @@ def _process_radar(seq, truth, radar: str, out: Path, show_progress: bool
     """Heatmaps and point clouds of every frame of one radar (``coloradar process``'s library
     function, writing under ``out/<radar>/``), compared with the truth. Returns the result and
     the data for the pictures."""
-    from .batch.layout import frame_file
+    from .batch.output_folder import frame_file
     from .batch.run_processing import output_paths, process_run
     from .calib import parse_heatmap_cfg
     from .formats import read_heatmap, read_radar_pointcloud

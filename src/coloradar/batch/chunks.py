@@ -21,7 +21,7 @@ from ..dataset import FrameStream, open_sequence
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError
 from ..formats import write_heatmap, write_radar_pointcloud
-from .layout import frame_file
+from .output_folder import ProcessedRun
 
 try:
     import resource
@@ -135,12 +135,12 @@ def _process_frame(stream: FrameStream, proc: RadarProcessor, chunk: FrameChunk,
     if int(stream.frame_ids[k]) != fid:
         raise ColoradarError(f"{stream.path(k)}: the run changed while it was being processed "
                              f"(expected frame {fid} at position {k})")
-    prods = chunk.products
+    prods, folder = chunk.products, ProcessedRun(chunk.out)
     hm, pts = proc.products(stream[k], "heatmaps" in prods, "pointclouds" in prods)
     if hm is not None:
-        write_heatmap(frame_file(chunk.out, chunk.radar, "heatmaps", fid), hm)
+        write_heatmap(folder.frame_file(chunk.radar, "heatmaps", fid), hm)
     if pts is not None:
-        write_radar_pointcloud(frame_file(chunk.out, chunk.radar, "pointclouds", fid), pts)
+        write_radar_pointcloud(folder.frame_file(chunk.radar, "pointclouds", fid), pts)
 
 
 def process_chunk(chunk: FrameChunk) -> ChunkResult:

@@ -22,17 +22,18 @@ code that also processes whole datasets — resumable, in chunks, on any executo
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..dataset import open_sequence
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..formats import write_heatmap, write_radar_pointcloud
-from .driver import DEFAULT_CHUNK_SIZE, CalibLike, RunTarget, check_products, process_targets
-from .executors import Executor
-from .layout import PRODUCTS, frame_file, output_paths
+from .driver import CalibLike, ProcessingJob, RunTarget, check_products, process_targets
+from .output_folder import PRODUCTS, ProcessedRun, output_paths
 from .report import REPORT, BatchReport
 
 __all__ = ["PRODUCTS", "ProcessReport", "output_paths", "process_frames", "process_run"]
@@ -103,22 +104,19 @@ def process_frames(seq_path: str | os.PathLike, calib_path: CalibLike, radar: st
     seq = open_sequence(seq_path, calib=calib_path)
     stream = seq.radar(radar).adc
     proc = RadarProcessor(seq.calib.radar(radar), settings)
+    folder = ProcessedRun(out)
     for k in frame_indices:
         fid = int(stream.frame_ids[k])
         hm, pts = proc.products(stream[k], "heatmaps" in prods, "pointclouds" in prods)
         if hm is not None:
-            write_heatmap(frame_file(out, radar, "heatmaps", fid), hm)
+            write_heatmap(folder.frame_file(radar, "heatmaps", fid), hm)
         if pts is not None:
-            write_radar_pointcloud(frame_file(out, radar, "pointclouds", fid), pts)
+            write_radar_pointcloud(folder.frame_file(radar, "pointclouds", fid), pts)
     return len(frame_indices)
 
 
-def process_run(run: str | os.PathLike, out: str | os.PathLike, *, calib: CalibLike = None,
-                radars: str | Sequence[str] = "all", products: Sequence[str] = PRODUCTS,
-                frames: slice | None = None, overwrite: bool = False,
-                settings: ProcessingSettings | None = None, progress: bool = True,
-                chunk_size: int = DEFAULT_CHUNK_SIZE, jobs: int | None = 1,
-                executor: Executor | None = None) -> ProcessReport:
+def process_run(run: str | os.PathLike, out: str | os.PathLike,
+                job: ProcessingJob | None = None, **options: Any) -> ProcessReport:
     """Process one run's ADC frames into heatmaps and/or point clouds under ``out``.
 
     Parameters
@@ -127,6 +125,13 @@ def process_run(run: str | os.PathLike, out: str | os.PathLike, *, calib: CalibL
         Run folder or zip.
     out
         Output root (must not lie inside ``run``).
+    job
+        A :class:`~coloradar.batch.driver.ProcessingJob` holding the options below (its
+        ``strict`` is always on here, and its ``desc`` defaults to the run's name); keywords
+        replace its fields.
+
+    Other Parameters
+    ----------------
     calib
         Calibration object or folder/zip; None finds it beside the run as
         :func:`coloradar.dataset.open_sequence` does.
@@ -158,15 +163,13 @@ def process_run(run: str | os.PathLike, out: str | os.PathLike, *, calib: CalibL
         Frames that failed (malformed input) are listed in ``report.batch``; they do not
         raise.
     """
-    batch = process_targets([RunTarget(Path(run), Path(out))], Path(out) / REPORT, calib=calib,
-                            radars=radars, products=products, frames=frames,
-                            overwrite=overwrite, settings=settings, executor=executor,
-                            jobs=jobs, chunk_size=chunk_size, progress=progress, strict=True,
-                            desc=Path(run).name.removesuffix(".zip"))
+    defaults = {"desc": Path(run).name.removesuffix(".zip")} if job is None else {}
+    opts = dataclasses.replace(ProcessingJob.of(job, **{**defaults, **options}), strict=True)
+    batch = process_targets([RunTarget(Path(run), Path(out))], Path(out) / REPORT, opts)
     rep = ProcessReport(seconds=batch.seconds, batch=batch)
-    prods = check_products(products)
+    prods, folder = check_products(opts.products), ProcessedRun(out)
     for outcome in batch.runs.values():
         for radar, o in outcome.radars.items():
             rep.frames[radar] = o.frames
-            rep.folders[radar] = [output_paths(out, radar, p)[0] for p in prods]
+            rep.folders[radar] = [folder.paths(radar, p)[0] for p in prods]
     return rep

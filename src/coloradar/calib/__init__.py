@@ -1,4 +1,11 @@
-"""Typed, frozen calibration objects parsed from ColoRadar calib files, and derived quantities."""
+"""Typed, frozen calibration objects parsed from ColoRadar calib files, and derived quantities.
+
+One file kind per module (:mod:`.waveform`, :mod:`.antenna`, :mod:`.heatmap_grid`,
+:mod:`.coupling`, :mod:`.phase_frequency`, :mod:`.transforms`); :mod:`.rig` holds the records of
+a radar and of the whole rig, :mod:`.presets` builds them from the real rig's values, and
+:mod:`.sensor` loads them from a calib folder or zip (falling back to the presets) and writes
+them back.
+"""
 
 from .antenna import AntennaConfig, VirtualArray, format_antenna_cfg, parse_antenna_cfg
 from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib
@@ -9,15 +16,8 @@ from .phase_frequency import (
     parse_phase_frequency_calib,
 )
 from .presets import PRESET_TRANSFORMS, preset_calibration, preset_radar
-from .sensor import (
-    RADARS,
-    SENSORS,
-    Calibration,
-    RadarCalib,
-    load_calibration,
-    load_radar_calib,
-    write_calibration,
-)
+from .rig import RADARS, SENSORS, Calibration, RadarCalib
+from .sensor import load_calibration, load_radar_calib, write_calibration
 from .transforms import Extrinsic, format_transform, parse_transform
 from .waveform import SPEED_OF_LIGHT, WaveformConfig, format_waveform_cfg, parse_waveform_cfg
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import SettingsError
 from .antenna import AntennaConfig
 from .heatmap_grid import HeatmapConfig, shipped_angle_bins
-from .sensor import Calibration, RadarCalib
+from .rig import Calibration, RadarCalib
 from .transforms import Extrinsic
 from .waveform import WaveformConfig
 

@@ -6,7 +6,8 @@ import argparse
 import sys
 
 from ..dataset import open_sequence
-from ..interop.ros import DEFAULT_TOPICS, GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, ROS_FORMATS, export_bag
+from ..interop.bag_export import GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, export_bag
+from ..interop.ros_messages import DEFAULT_TOPICS, ROS_FORMATS
 from ..progress import Progress
 from . import _export_hdf5
 from ._common import new_output_file, processing_setting

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..interop.ros import DEFAULT_TOPICS, import_bag, iter_topics, parse_field_map, parse_topic_map
+from ..interop.bag_import import import_bag, iter_topics, parse_field_map, parse_topic_map
+from ..interop.ros_messages import DEFAULT_TOPICS
 from ..progress import Progress
 
 

@@ -8,7 +8,7 @@ import os
 import sys
 
 from ..batch.driver import DEFAULT_CHUNK_SIZE, process
-from ..batch.layout import PRODUCTS
+from ..batch.output_folder import PRODUCTS
 from ..dsp import ProcessingSettings
 from ..formats.source import check_input_path
 from ._common import UsageError, processing_setting

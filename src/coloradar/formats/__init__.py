@@ -1,4 +1,8 @@
-"""Bytes <-> arrays for every ColoRadar file kind, with size checks, and folder/zip sources."""
+"""Bytes <-> arrays for every ColoRadar file kind, with size checks, and folder/zip sources.
+
+:mod:`.layout` is the one table of the dataset's folder and file names; :mod:`.atomic` writes a
+file whole or not at all (and recognises what an interrupted write left behind).
+"""
 
 from .atomic import atomic_write_bytes, atomic_write_text, write_text_if_changed
 from .binary import (

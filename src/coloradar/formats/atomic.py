@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import os
+import re
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 from ..errors import ColoradarError, OutputExistsError, WriteError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "default_file_mode", "make_output_dir",
-           "new_output_path", "write_text_if_changed"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "clean_partial_files", "default_file_mode",
+           "make_output_dir", "new_output_path", "write_text_if_changed"]
+
+# atomic_write_bytes's temporary names: ".<final name>.<random>.tmp"
+_PARTIAL_RE = re.compile(r"^\..+\.tmp$")
 
 
 def _read_umask() -> int:
@@ -107,3 +112,24 @@ def new_output_path(path: str | os.PathLike[str], overwrite: bool = False) -> Pa
     if path.exists() and not overwrite:
         raise OutputExistsError(f"{path}: exists; pass overwrite=True (--overwrite) to replace it")
     return path
+
+
+def clean_partial_files(folders: Iterable[Path], name: str | None = None) -> int:
+    """Delete temporary files of interrupted atomic writes (``.<name>.<random>.tmp``, see
+    :func:`atomic_write_bytes`) directly inside ``folders`` (only those of file ``name`` when
+    given); returns how many."""
+    n = 0
+    for folder in folders:
+        try:
+            entries = list(os.scandir(folder))
+        except FileNotFoundError:
+            continue
+        for e in entries:
+            if (_PARTIAL_RE.match(e.name) and e.is_file()
+                    and (name is None or e.name.startswith(f".{name}."))):
+                try:
+                    os.unlink(e.path)
+                    n += 1
+                except FileNotFoundError:
+                    pass
+    return n

@@ -3,6 +3,9 @@ rig velocity and point maps.
 
 Naming: ``a_T_b`` maps coordinates in frame ``b`` to frame ``a`` (the pose of ``b`` in ``a``);
 ``world_T_sensor = world_T_base @ base_T_sensor``. See ``docs/geometry.md``.
+
+:mod:`.se3` is the floor: :mod:`.trajectory` builds on it, and ``SE3 @ Trajectory`` is answered
+by ``Trajectory.__rmatmul__``, so that ``se3`` imports nothing above it.
 """
 
 from .cloud_io import (

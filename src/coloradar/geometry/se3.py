@@ -9,7 +9,7 @@ Composition chains the inner names: ``world_T_sensor = world_T_base @ base_T_sen
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, overload
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -19,7 +19,6 @@ from ..errors import SettingsError
 
 if TYPE_CHECKING:
     from ..calib import Extrinsic
-    from .trajectory import Trajectory
 
 __all__ = ["SE3", "transform_points"]
 
@@ -129,12 +128,10 @@ class SE3:
         inv = self.rotation.inv()
         return SE3(inv, -rotate(inv, self.translation))
 
-    @overload
-    def __matmul__(self, other: SE3) -> SE3: ...
-    @overload
-    def __matmul__(self, other: Trajectory) -> Trajectory: ...
-    def __matmul__(self, other: SE3 | Trajectory) -> SE3 | Trajectory:
-        """``a_T_c = a_T_b @ b_T_c``; with a :class:`Trajectory` on the right, every pose."""
+    def __matmul__(self, other: SE3) -> SE3:
+        """``a_T_c = a_T_b @ b_T_c``; with a :class:`~coloradar.geometry.Trajectory` on the
+        right, every pose (``Trajectory.__rmatmul__`` answers: this module knows nothing of
+        trajectories)."""
         if isinstance(other, SE3):
             return SE3(self.rotation * other.rotation,
                        rotate(self.rotation, other.translation) + self.translation)

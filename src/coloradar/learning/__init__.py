@@ -9,8 +9,9 @@
 * :mod:`.batching` — numpy and PyTorch collation; :func:`torch_dataset` (torch optional).
 * :mod:`.scoring` — a folder of predicted clouds against a run's targets (``coloradar score``).
 
-The file format written by ``coloradar export RUN OUT.h5 --format hdf5`` is
-:mod:`coloradar.interop.hdf5`. See docs/learning.md.
+* :mod:`.h5_file` — :class:`~.h5_file.H5Run`, the reader of the files written by ``coloradar
+  export RUN OUT.h5 --format hdf5`` (their writer and layout: :mod:`coloradar.interop.hdf5`,
+  which imports this package; nothing here imports ``interop``). See docs/learning.md.
 """
 
 from .batching import VARIABLE_KEYS, collate_numpy, collate_torch, torch_dataset

@@ -59,44 +59,13 @@ from ..errors import FrameIndexError, MissingDataError, SettingsError
 from ..geometry import SE3, Trajectory, nearest_indices, sensor_to_base, trajectory_from_groundtruth
 from .splits import split_runs
 from .targets import TargetSettings, build_voxel_map, frame_target, prepare_cut
-from .views import BevGrid, BevProjector, lidar_bev, lidar_polar, radar_polar
+from .views import BevGrid, BevProjector, ViewOptions, lidar_bev, lidar_polar, radar_polar
 
 __all__ = ["PRODUCTS", "SyncedSamples", "ViewOptions"]
 
 PRODUCTS = ("heatmap", "points", "polar", "bev")
 _FROM_HEATMAP = ("heatmap", "polar", "bev")
 H5_SUFFIXES = (".h5", ".hdf5")
-
-
-@dataclass(frozen=True)
-class ViewOptions:
-    """How image views are made from heatmaps (:mod:`coloradar.learning.views`).
-
-    Attributes
-    ----------
-    grid
-        The BEV grid; None: :meth:`BevGrid.for_radar` of the first run's heatmap grid.
-    reduce
-        ``"max"`` or ``"mean"`` over elevation.
-    range_rate
-        Add the range-rate channel to radar images.
-    angles
-        ``"stream"``: the grid stored with the heatmaps (``seq.<radar>.heatmap_config``: the
-        true angles for heatmaps coloradar computed, the release's labels for shipped ones);
-        ``"true"``: ``RadarProcessor(calib).heatmap_config()``, the FFT grid of the virtual
-        array.
-    """
-
-    grid: BevGrid | None = None
-    reduce: str = "max"
-    range_rate: bool = True
-    angles: str = "stream"
-
-    def __post_init__(self) -> None:
-        if self.reduce not in ("max", "mean"):
-            raise SettingsError(f"reduce must be 'max' or 'mean', got {self.reduce!r}")
-        if self.angles not in ("stream", "true"):
-            raise SettingsError(f"angles must be 'stream' or 'true', got {self.angles!r}")
 
 
 def _half_period(t: np.ndarray) -> float:
@@ -225,7 +194,7 @@ class SyncedSamples:
             raise SettingsError("mix of exported files and run folders: give one kind")
         self._runs: list[Any]
         if files:
-            from ..interop.hdf5 import H5Run  # lazily: h5py is an optional extra
+            from .h5_file import H5Run  # lazily: h5py is an optional extra
 
             self._runs = [H5Run(f) for f in files]
             first = self._runs[0]

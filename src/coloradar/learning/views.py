@@ -36,7 +36,7 @@ import numpy as np
 from ..calib import HeatmapConfig
 from ..errors import SettingsError
 
-__all__ = ["DB_FLOOR", "LIDAR_CHANNELS", "BevGrid", "BevProjector", "fov_mask", "lidar_bev",
+__all__ = ["DB_FLOOR", "LIDAR_CHANNELS", "BevGrid", "BevProjector", "ViewOptions", "fov_mask", "lidar_bev",
            "lidar_polar", "point_bins", "radar_bev", "radar_polar"]
 
 DB_FLOOR = -200.0
@@ -389,3 +389,34 @@ def lidar_polar(points: np.ndarray, config: HeatmapConfig) -> np.ndarray:
     n_az, n_r = config.num_azimuth_bins, config.num_range_bins
     out = _scatter_channels(n_r * n_az, rk[keep] * n_az + az[keep], xyz[keep, 2], inten[keep])
     return out.reshape(3, n_r, n_az)
+
+
+@dataclass(frozen=True)
+class ViewOptions:
+    """How image views are made from heatmaps (:mod:`coloradar.learning.views`).
+
+    Attributes
+    ----------
+    grid
+        The BEV grid; None: :meth:`BevGrid.for_radar` of the first run's heatmap grid.
+    reduce
+        ``"max"`` or ``"mean"`` over elevation.
+    range_rate
+        Add the range-rate channel to radar images.
+    angles
+        ``"stream"``: the grid stored with the heatmaps (``seq.<radar>.heatmap_config``: the
+        true angles for heatmaps coloradar computed, the release's labels for shipped ones);
+        ``"true"``: ``RadarProcessor(calib).heatmap_config()``, the FFT grid of the virtual
+        array.
+    """
+
+    grid: BevGrid | None = None
+    reduce: str = "max"
+    range_rate: bool = True
+    angles: str = "stream"
+
+    def __post_init__(self) -> None:
+        if self.reduce not in ("max", "mean"):
+            raise SettingsError(f"reduce must be 'max' or 'mean', got {self.reduce!r}")
+        if self.angles not in ("stream", "true"):
+            raise SettingsError(f"angles must be 'stream' or 'true', got {self.angles!r}")

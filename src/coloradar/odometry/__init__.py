@@ -9,7 +9,9 @@
 - :func:`run_odometry`, :func:`evaluate_odometry`: the ``coloradar odometry`` and
   ``coloradar evaluate`` commands as functions; :func:`ego_velocity_report` for summaries.
 - :func:`absolute_trajectory_error`, :func:`relative_pose_error`, :func:`velocity_errors`,
-  :func:`umeyama_alignment`: evaluation against ground truth; TUM files for ``evo``.
+  :func:`umeyama_alignment`: evaluation against ground truth; TUM files for ``evo``. The
+  error records, :class:`Evaluation` among them, live in :mod:`.metrics`, below both
+  :mod:`.evaluation` (which computes them) and :mod:`.plot` (which draws them).
 
 See ``docs/odometry.md``.
 """

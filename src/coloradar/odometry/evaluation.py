@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,12 +26,8 @@ from ..geometry import Trajectory, trajectory_from_groundtruth
 from .metrics import (
     DRIFT_LENGTHS,
     Align,
-    ATEResult,
-    DriftResult,
-    FinalError,
+    Evaluation,
     RPEPairing,
-    RPEResult,
-    VelocityErrors,
     absolute_trajectory_error,
     final_position_error,
     relative_pose_error,
@@ -54,42 +49,6 @@ __all__ = [
 ]
 
 EVALUATION_FILES = ("evaluation.json", "evaluation.txt", "groundtruth.txt", "evaluation.png")
-
-
-@dataclass(frozen=True, eq=False)
-class Evaluation:
-    """Errors of one odometry estimate.
-
-    Attributes
-    ----------
-    estimate, reference
-        The full estimated trajectory and the ground truth (``world_T_base``).
-    ate
-        Absolute trajectory error.
-    rpe
-        Relative pose errors, one per distance.
-    velocity
-        Ego-velocity errors, or None without an ego-velocity track.
-    track
-        The ego-velocity track, if any.
-    info
-        What was evaluated (run, radar, source, alignment…), JSON-compatible.
-    drift
-        KITTI-style drift over :data:`~coloradar.odometry.metrics.DRIFT_LENGTHS` (or the
-        lengths asked for).
-    final
-        Position error at the end, from the same start (``origin`` alignment).
-    """
-
-    estimate: Trajectory
-    reference: Trajectory
-    ate: ATEResult
-    rpe: list[RPEResult]
-    velocity: VelocityErrors | None = None
-    track: EgoVelocityTrack | None = None
-    info: dict = field(default_factory=dict)
-    drift: DriftResult | None = None
-    final: FinalError | None = None
 
 
 def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,

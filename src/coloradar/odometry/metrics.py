@@ -40,7 +40,7 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, get_args
 
 import numpy as np
@@ -57,6 +57,7 @@ __all__ = [
     "RPE_PAIRINGS",
     "ATEResult",
     "DriftResult",
+    "Evaluation",
     "FinalError",
     "RPEPairing",
     "RPEResult",
@@ -602,3 +603,39 @@ def velocity_errors(track: EgoVelocityTrack, reference: Trajectory, calib: Calib
     else:
         ref = np.zeros((0, 3))
     return VelocityErrors(t, track.velocity[use], ref, len(track), int((~track.ok).sum()))
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """Errors of one odometry estimate.
+
+    Attributes
+    ----------
+    estimate, reference
+        The full estimated trajectory and the ground truth (``world_T_base``).
+    ate
+        Absolute trajectory error.
+    rpe
+        Relative pose errors, one per distance.
+    velocity
+        Ego-velocity errors, or None without an ego-velocity track.
+    track
+        The ego-velocity track, if any.
+    info
+        What was evaluated (run, radar, source, alignment…), JSON-compatible.
+    drift
+        KITTI-style drift over :data:`~coloradar.odometry.metrics.DRIFT_LENGTHS` (or the
+        lengths asked for).
+    final
+        Position error at the end, from the same start (``origin`` alignment).
+    """
+
+    estimate: Trajectory
+    reference: Trajectory
+    ate: ATEResult
+    rpe: list[RPEResult]
+    velocity: VelocityErrors | None = None
+    track: EgoVelocityTrack | None = None
+    info: dict = field(default_factory=dict)
+    drift: DriftResult | None = None
+    final: FinalError | None = None

@@ -24,7 +24,7 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
                                  "pip install 'coloradar[viz]'") from exc
 
 if TYPE_CHECKING:
-    from .evaluation import Evaluation
+    from .metrics import Evaluation
 
 __all__ = ["evaluation_figure", "plot_evaluation"]
 

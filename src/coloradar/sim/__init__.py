@@ -6,6 +6,10 @@ Quick start::
     res = simulate_run("sim_out", scene="corridor", duration=10, seed=0)
     truth = load_truth(res.run_path)          # what every radar frame saw, rig velocities, …
 
+What run to simulate is one :class:`~coloradar.sim.run.SimulationSpec` (scene, duration, seed,
+motion, sensors, layout, IMU model…); ``simulate_run(out, spec, seed=3)`` takes it and/or its
+fields as keywords, and how to run it (``overwrite``, ``workers``, ``progress``) beside.
+
 See ``docs/simulator.md`` for the models, the scene file format and the truth file.
 """
 
@@ -30,6 +34,7 @@ from .run import (
     SENSOR_CHOICES,
     SimResult,
     Simulation,
+    SimulationSpec,
     open_simulation,
     resolve_scene,
     run_name,
@@ -67,6 +72,7 @@ __all__ = [
     "SimResult",
     "SimTruth",
     "Simulation",
+    "SimulationSpec",
     "Sinusoids",
     "apply_channel_errors",
     "builtin_scene",

@@ -39,6 +39,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -95,6 +96,7 @@ __all__ = [
     "SENSOR_CHOICES",
     "SimResult",
     "Simulation",
+    "SimulationSpec",
     "heatmap_processor",
     "open_simulation",
     "resolve_scene",
@@ -298,13 +300,12 @@ class _Context:
     """Shared, read-only state of one simulation (threads only read it)."""
 
     def __init__(self, scene: Scene, traj: RigTrajectory, calib: Calibration,
-                 coupling_adc: dict[str, np.ndarray], seed: int, start_time: float,
+                 coupling_adc: dict[str, np.ndarray], spec: SimulationSpec,
                  root: Path, progress: Progress | None, heatmaps: bool,
-                 layout: RunLayout = COLORADAR, imu_model: ImuModel = GX5_25,
-                 radar_time_offset: float = 0.0):
+                 layout: RunLayout = COLORADAR, imu_model: ImuModel = GX5_25):
         self.scene, self.traj, self.calib = scene, traj, calib
-        self.imu_model, self.radar_time_offset = imu_model, radar_time_offset
-        self.coupling_adc, self.seed, self.start_time = coupling_adc, seed, start_time
+        self.imu_model, self.radar_time_offset = imu_model, float(spec.radar_time_offset)
+        self.coupling_adc, self.seed, self.start_time = coupling_adc, spec.seed, spec.start_time
         self.root, self.heatmaps, self.layout = root, heatmaps, layout
         self._progress = progress
         self._lock = threading.Lock()
@@ -416,28 +417,31 @@ def _check_target(final: Path, overwrite: bool) -> None:
         raise OutputExistsError(f"{final}: exists and is not a simulated run; not replacing it")
 
 
-def simulate_run(
-    out: str | os.PathLike[str],
-    *,
-    scene: str | os.PathLike[str] | Scene = "corridor",
-    duration: float = 10.0,
-    seed: int = 0,
-    motion: str = "smooth",
-    speed: float | None = None,
-    sensors: Sequence[str] | None = None,
-    vicon: bool = False,
-    heatmaps: bool | None = None,
-    start_time: float = DEFAULT_START_TIME,
-    name: str | None = None,
-    overwrite: bool = False,
-    board_seed: int = 2021,
-    workers: int = 2,
-    progress: Progress | None = None,
-    layout: str | RunLayout = "coloradar",
-    imu: ImuModel | None = None,
-    rest: float = 0.0,
-    radar_time_offset: float = 0.0,
-) -> SimResult:
+@dataclass(frozen=True)
+class SimulationSpec:
+    """What run :func:`simulate_run` simulates: scene, motion, sensors, timing, naming, layout
+    and sensor models (each field is documented there, and is also one of its keywords)."""
+
+    scene: str | os.PathLike[str] | Scene = "corridor"
+    duration: float = 10.0
+    seed: int = 0
+    motion: str = "smooth"
+    speed: float | None = None
+    sensors: Sequence[str] | None = None
+    vicon: bool = False
+    heatmaps: bool | None = None
+    start_time: float = DEFAULT_START_TIME
+    name: str | None = None
+    board_seed: int = 2021
+    layout: str | RunLayout = "coloradar"
+    imu: ImuModel | None = None
+    rest: float = 0.0
+    radar_time_offset: float = 0.0
+
+
+def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None, *,
+                 overwrite: bool = False, workers: int = 2, progress: Progress | None = None,
+                 **fields: Any) -> SimResult:
     """Simulate one run and write it, with its calibration, under ``out``.
 
     Parameters
@@ -445,6 +449,18 @@ def simulate_run(
     out
         Output root: gets ``calib/`` and ``<name>/`` (``kitti/<name>/`` for ColoRadar+),
         created if needed.
+    spec
+        A :class:`SimulationSpec`: what run to simulate (its fields are listed below); keyword
+        arguments named like its fields replace them, so ``simulate_run(out, seed=3)`` works.
+    overwrite
+        Replace an existing simulated run of that name (and a differing ``calib/``).
+    workers
+        Threads (the lidar is simulated beside the radars).
+    progress
+        ``progress(stage, done, total)`` callback.
+
+    Other Parameters
+    ----------------
     scene
         A built-in scene name (``corridor``, ``courtyard``, ``mine``), a ``.json`` scene file or
         a :class:`~coloradar.sim.scene.Scene`.
@@ -468,14 +484,8 @@ def simulate_run(
         Unix time of the run start [s].
     name
         Run folder name; default :func:`run_name`.
-    overwrite
-        Replace an existing simulated run of that name (and a differing ``calib/``).
     board_seed
         Seed of the radar boards' channel errors and coupling (shared by all runs in ``out``).
-    workers
-        Threads (the lidar is simulated beside the radars).
-    progress
-        ``progress(stage, done, total)`` callback.
     layout
         ``"coloradar"`` or ``"coloradar_plus"`` (:mod:`coloradar.formats.layout`): folders,
         frame numbering and calib files as that release has them. ColoRadar+ has no
@@ -496,42 +506,19 @@ def simulate_run(
     SimResult
     """
     t0 = time.perf_counter()
-    try:
-        lay = get_layout(layout)
-    except MissingDataError as exc:
-        raise ColoradarError(str(exc)) from None
-    choices = tuple(s for s in SENSOR_CHOICES
-                    if s in lay.sensor_folders and (s not in RADARS or s in lay.radars))
-    sensors = choices if sensors is None else tuple(sensors)
-    bad = [s for s in sensors if s not in choices]
-    if bad:
-        raise ColoradarError(f"unknown sensor(s) {', '.join(bad)}"
-                             f"{'' if lay is COLORADAR else ' in the ' + lay.title + ' layout'}"
-                             f"; expected some of {', '.join(choices)}")
-    if vicon and "vicon" not in lay.tables:
-        raise ColoradarError(f"the {lay.title} layout has no Vicon poses")
-    if motion not in MOTION_PROFILES:
-        raise ColoradarError(f"unknown motion profile {motion!r}; expected one of "
-                             f"{', '.join(MOTION_PROFILES)}")
-    if speed is not None and not (np.isfinite(speed) and 0 <= speed <= 30):
-        raise ColoradarError(f"speed must be in [0, 30] m/s, got {speed}")
-    if not 0 < duration <= 3600:
-        raise ColoradarError(f"duration must be in (0, 3600] s, got {duration}")
-    if not (np.isfinite(rest) and 0 <= rest < duration):
-        raise ColoradarError(f"rest must be in [0, duration) s, got {rest}")
-    if not (np.isfinite(radar_time_offset) and abs(radar_time_offset) <= 0.5):
-        raise ColoradarError(f"radar_time_offset must be within ±0.5 s, got {radar_time_offset}")
-    imu_model = imu or GX5_25
-    sc = resolve_scene(scene)
+    spec = replace(spec or SimulationSpec(), **fields)
+    lay, sensors = _check_spec(spec)
+    imu_model = spec.imu or GX5_25
+    sc = resolve_scene(spec.scene)
     out = Path(out)
-    name = name or run_name(sc.name, seed, start_time)
+    name = spec.name or run_name(sc.name, spec.seed, spec.start_time)
     runs = out / lay.runs_folder if lay.runs_folder else out
     final = runs / name
     _check_target(final, overwrite)
-    want_heatmaps = heatmaps is not False and any(r in sensors for r in RADARS)
-    calib, coupling_adc = simulated_calibration(board_seed)
+    want_heatmaps = spec.heatmaps is not False and any(r in sensors for r in RADARS)
+    calib, coupling_adc = simulated_calibration(spec.board_seed)
     has_proc = want_heatmaps and heatmap_processor(calib.cascade) is not None
-    if heatmaps and want_heatmaps and not has_proc:
+    if spec.heatmaps and want_heatmaps and not has_proc:
         raise ColoradarError("heatmaps were asked for but coloradar.dsp (RadarProcessor."
                              "heatmap) is not available")
     _write_calib(calib, out / "calib", overwrite, lay)
@@ -540,11 +527,66 @@ def simulate_run(
     if partial.exists():
         shutil.rmtree(partial)  # a previous, interrupted simulation of this run
     partial.mkdir(parents=True)
-    traj = _trajectory(sc, motion, seed, speed, rest)
-    ctx = _Context(sc, traj, calib, coupling_adc, seed, start_time, partial, progress, has_proc,
-                   lay, imu_model, float(radar_time_offset))
+    traj = _trajectory(sc, spec.motion, spec.seed, spec.speed, spec.rest)
+    ctx = _Context(sc, traj, calib, coupling_adc, spec, partial, progress, has_proc, lay,
+                   imu_model)
+    times, gt_times = _schedule(ctx, spec.duration)
+    try:
+        truth = _simulate_scans(ctx, sensors, times, workers)
+        truth.update(_write_slow_streams(ctx, sensors, spec.vicon, times, gt_times))
+        counts = _counts(sensors, spec.vicon, times, gt_times, has_proc, lay)
+        _write_run_info(ctx, partial, sc, dict(
+            scene=sc.name, duration=spec.duration, seed=spec.seed, motion=spec.motion,
+            speed=spec.speed, rest=float(spec.rest),
+            radar_time_offset=float(spec.radar_time_offset),
+            imu_model=asdict(imu_model), sensors=list(sensors),
+            vicon=spec.vicon, heatmaps=has_proc, start_time=spec.start_time, name=name,
+            board_seed=spec.board_seed, coloradar_version=__version__, counts=counts,
+            layout=lay.name), truth)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    _move_into_place(partial, final)
+    return SimResult(final, out / "calib", counts, time.perf_counter() - t0, has_proc, sc.name)
+
+
+def _check_spec(spec: SimulationSpec) -> tuple[RunLayout, tuple[str, ...]]:
+    """Step 1: refuse what cannot be simulated; returns the layout and the sensors to write."""
+    try:
+        lay = get_layout(spec.layout)
+    except MissingDataError as exc:
+        raise ColoradarError(str(exc)) from None
+    choices = tuple(s for s in SENSOR_CHOICES
+                    if s in lay.sensor_folders and (s not in RADARS or s in lay.radars))
+    sensors = choices if spec.sensors is None else tuple(spec.sensors)
+    bad = [s for s in sensors if s not in choices]
+    if bad:
+        raise ColoradarError(f"unknown sensor(s) {', '.join(bad)}"
+                             f"{'' if lay is COLORADAR else ' in the ' + lay.title + ' layout'}"
+                             f"; expected some of {', '.join(choices)}")
+    if spec.vicon and "vicon" not in lay.tables:
+        raise ColoradarError(f"the {lay.title} layout has no Vicon poses")
+    if spec.motion not in MOTION_PROFILES:
+        raise ColoradarError(f"unknown motion profile {spec.motion!r}; expected one of "
+                             f"{', '.join(MOTION_PROFILES)}")
+    speed, duration = spec.speed, spec.duration
+    if speed is not None and not (np.isfinite(speed) and 0 <= speed <= 30):
+        raise ColoradarError(f"speed must be in [0, 30] m/s, got {speed}")
+    if not 0 < duration <= 3600:
+        raise ColoradarError(f"duration must be in (0, 3600] s, got {duration}")
+    if not (np.isfinite(spec.rest) and 0 <= spec.rest < duration):
+        raise ColoradarError(f"rest must be in [0, duration) s, got {spec.rest}")
+    if not (np.isfinite(spec.radar_time_offset) and abs(spec.radar_time_offset) <= 0.5):
+        raise ColoradarError("radar_time_offset must be within ±0.5 s, got "
+                             f"{spec.radar_time_offset}")
+    return lay, sensors
+
+
+def _schedule(ctx: _Context, duration: float) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Step 2: every stream's sample times [s from the start], drawn in a fixed order whatever
+    the sensor selection, and the ground truth's."""
     trng = ctx.rng("timing")
-    # Every stream's timestamps, drawn in a fixed order whatever the sensor selection.
+    calib = ctx.calib
     times = {
         "cascade": _stream_times(RATES["cascade"], duration,
                                  calib.cascade.waveform.frame_duration,
@@ -554,12 +596,17 @@ def simulate_run(
                                      RADAR_MODELS["single_chip"].frame_jitter, trng),
         "lidar": _stream_times(RATES["lidar"], duration, LidarModel().period,
                                LidarModel().jitter, trng),
-        "imu": _stream_times(RATES["imu"], duration, 0.0, imu_model.jitter, trng),
+        "imu": _stream_times(RATES["imu"], duration, 0.0, ctx.imu_model.jitter, trng),
         "vicon": _stream_times(RATES["vicon"], duration, 0.0, 1e-4, trng),
     }
     n_gt = int(np.ceil(duration * RATES["groundtruth"] - 1e-9)) + 1
-    gt_times = np.arange(n_gt) / RATES["groundtruth"]
+    return times, np.arange(n_gt) / RATES["groundtruth"]
 
+
+def _simulate_scans(ctx: _Context, sensors: Sequence[str], times: dict[str, np.ndarray],
+                    workers: int) -> dict[str, np.ndarray]:
+    """Step 3: the lidar and radar frames, on ``workers`` threads; returns their truth."""
+    sc = ctx.scene
     # Lazily built scene data, built once here rather than raced for by the threads.
     _ = sc.static_scatterers, sc.static_rect_arrays, [o.num_scatterers for o in sc.objects]
     tasks: list[Callable[[], dict]] = []
@@ -569,28 +616,14 @@ def simulate_run(
         if r in sensors:
             tasks.append(functools.partial(_radar_task, ctx, r, times[r]))
     truth: dict[str, np.ndarray] = {}
-    try:
-        if workers > 1 and len(tasks) > 1:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                for res in [pool.submit(t) for t in tasks]:
-                    truth.update(res.result())
-        else:
-            for t in tasks:
-                truth.update(t())
-        truth.update(_write_slow_streams(ctx, sensors, vicon, times, gt_times))
-        counts = _counts(sensors, vicon, times, gt_times, has_proc, lay)
-        _write_run_info(ctx, partial, sc, dict(
-            scene=sc.name, duration=duration, seed=seed, motion=motion, speed=speed,
-            rest=float(rest), radar_time_offset=float(radar_time_offset),
-            imu_model=asdict(imu_model), sensors=list(sensors),
-            vicon=vicon, heatmaps=has_proc, start_time=start_time, name=name,
-            board_seed=board_seed, coloradar_version=__version__, counts=counts,
-            layout=lay.name), truth)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
-    _move_into_place(partial, final)
-    return SimResult(final, out / "calib", counts, time.perf_counter() - t0, has_proc, sc.name)
+    if workers > 1 and len(tasks) > 1:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for res in [pool.submit(t) for t in tasks]:
+                truth.update(res.result())
+    else:
+        for t in tasks:
+            truth.update(t())
+    return truth
 
 
 def _write_slow_streams(ctx: _Context, sensors: Sequence[str], vicon: bool,
