@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import re
 from pathlib import Path
 
@@ -58,6 +59,33 @@ def non_negative_float(text: str) -> float:
 def positive_int(text: str) -> int:
     """An option's value that must be a whole number ≥ 1 (a stride, a resolution)."""
     return _number(text, int, lambda v: v >= 1, "a whole number ≥ 1")
+
+
+def add_executor_args(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """The "where the work runs" options of the batch commands: ``--jobs`` (local pool) or
+    ``--scheduler`` / ``--scheduler-file`` (Dask). Returns the group, for more options."""
+    g = p.add_argument_group("where the work runs")
+    g.add_argument("--jobs", "-j", type=positive_int, metavar="N",
+                   help=f"local worker processes (default: all cores, {os.cpu_count()} here; "
+                        "1: in this process)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on the Dask cluster of this scheduler (tcp://host:8786)")
+    g.add_argument("--scheduler-file", metavar="FILE",
+                   help="run on the Dask cluster whose scheduler wrote FILE "
+                        "(dask scheduler --scheduler-file FILE)")
+    return g
+
+
+def executor_from_args(args: argparse.Namespace):
+    """The Dask executor the options of :func:`add_executor_args` name, or None (the local
+    pool of ``--jobs``); both at once is a usage error."""
+    if not (args.scheduler or args.scheduler_file):
+        return None
+    if args.jobs is not None:
+        raise UsageError("--jobs sets the local pool; on a Dask cluster the workers "
+                         "(dask worker --nworkers/--nthreads) set the parallelism")
+    from ..batch.executors import make_executor
+    return make_executor(scheduler=args.scheduler, scheduler_file=args.scheduler_file)
 
 
 def add_quiet_arg(p: argparse.ArgumentParser) -> None:

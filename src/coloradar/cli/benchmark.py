@@ -5,21 +5,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 
 from ..errors import ColoradarError
 from ..odometry.metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
-
-
-def _positive(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number ≥ 1, got {text!r}")
-    return n
+from ._common import add_executor_args, executor_from_args
 
 
 def _named(text: str) -> tuple[str | None, str]:
@@ -101,14 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="RPE lengths reported per run in the JSON (default 1 2 5)")
     e.add_argument("--rpe-pairing", choices=RPE_PAIRINGS, default="every_pose",
                    help="pairs of those RPEs (default every_pose; evo: evo_rpe's)")
-    g = p.add_argument_group("where the work runs")
-    g.add_argument("--jobs", "-j", type=_positive, metavar="N",
-                   help=f"local worker processes (default: all cores, {os.cpu_count()} here; "
-                        "1: in this process)")
-    g.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run on the Dask cluster of this scheduler (tcp://host:8786)")
-    g.add_argument("--scheduler-file", metavar="FILE",
-                   help="run on the Dask cluster whose scheduler wrote FILE")
+    add_executor_args(p)
     p.add_argument("--overwrite", action="store_true",
                    help="redo every run (default: resume a benchmark made with the same "
                         "settings, refuse one made otherwise)")
@@ -117,7 +100,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..batch.executors import make_executor
     from ..odometry.benchmark import (
         Method,
         benchmark,
@@ -127,9 +109,7 @@ def run(args: argparse.Namespace) -> int:
         tum_method,
     )
 
-    if (args.scheduler or args.scheduler_file) and args.jobs is not None:
-        raise ColoradarError("--jobs sets the local pool; on a Dask cluster the workers set "
-                             "the parallelism")
+    executor = executor_from_args(args)
     methods: list[Method] = []
     estimators = args.estimator or (["default"] if not (args.estimate or args.method) else [])
     if "none" in estimators and len(estimators) > 1:
@@ -149,9 +129,6 @@ def run(args: argparse.Namespace) -> int:
     odometry = {k: getattr(args, k) for k in ("radar", "source", "orientation", "seed")
                 if getattr(args, k) is not None}
     odometry.update(dict(args.settings))
-    executor = None
-    if args.scheduler or args.scheduler_file:
-        executor = make_executor(scheduler=args.scheduler, scheduler_file=args.scheduler_file)
     try:
         result = benchmark(args.dataset, args.out, methods=methods, runs=args.runs,
                            split=args.split, calib=args.calib, odometry=odometry,

@@ -11,7 +11,7 @@ from ..batch.driver import DEFAULT_CHUNK_SIZE, process
 from ..batch.output_folder import PRODUCTS
 from ..dsp import ProcessingSettings
 from ..formats.source import check_input_path
-from ._common import UsageError, processing_setting
+from ._common import UsageError, add_executor_args, executor_from_args, positive_int, processing_setting
 
 
 def _frames(text: str) -> slice:
@@ -41,16 +41,6 @@ def _names(text: str) -> list[str]:
     if not names:
         raise argparse.ArgumentTypeError("expected comma-separated run names or patterns")
     return names
-
-
-def _positive(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number ≥ 1, got {text!r}")
-    return n
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -88,35 +78,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="delete the requested products' existing frame files and redo every "
                         "frame (default: resume output made with the same settings; refuse "
                         "output made otherwise)")
-    g = p.add_argument_group("where the work runs")
-    g.add_argument("--jobs", "-j", type=_positive, metavar="N",
-                   help="local worker processes (default: all cores, "
-                        f"{os.cpu_count()} here; 1: in this process)")
-    g.add_argument("--chunk-size", type=_positive, default=DEFAULT_CHUNK_SIZE, metavar="N",
+    g = add_executor_args(p)
+    g.add_argument("--chunk-size", type=positive_int, default=DEFAULT_CHUNK_SIZE, metavar="N",
                    help=f"frames per task (default {DEFAULT_CHUNK_SIZE})")
-    g.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run on the Dask cluster of this scheduler (tcp://host:8786)")
-    g.add_argument("--scheduler-file", metavar="FILE",
-                   help="run on the Dask cluster whose scheduler wrote FILE "
-                        "(dask scheduler --scheduler-file FILE)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..batch.executors import make_executor
-
-    if (args.scheduler or args.scheduler_file) and args.jobs is not None:
-        raise UsageError("--jobs sets the local pool; on a Dask cluster the workers "
-                         "(dask worker --nworkers/--nthreads) set the parallelism")
+    executor = executor_from_args(args)
     try:
         settings = ProcessingSettings(**dict(args.settings)) if args.settings else None
     except ValueError as exc:
         raise UsageError(f"--set: {exc}") from None
     check_input_path(args.path, "a run folder, a run .zip or a dataset root folder")
-    executor = None
-    if args.scheduler or args.scheduler_file:
-        executor = make_executor(scheduler=args.scheduler, scheduler_file=args.scheduler_file)
     try:
         report = process(args.path, args.out, runs=args.runs, calib=args.calib,
                          radars=args.radar, products=args.products, frames=args.frames,
