@@ -4,6 +4,7 @@ passed on silently."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -134,7 +135,13 @@ def test_process_skips_a_frame_without_a_time_and_writes_none_with_nan(copy, tmp
     with pytest.warns(DataWarning, match=r"timestamps\.txt, line 2: timestamp nan"):
         code, _, err = _cli(["process", copy / RUN, "--out", out, "--radar", "cascade",
                              "--jobs", 1, "--quiet"], capsys)
-    assert code == 0, err
+    # Not processed, and not silent: a failed frame in the report and on stderr, exit 1.
+    assert code == 1, err
+    assert "frame_1.bin" in err and "not a finite number" in err
+    report = json.loads((out / "process_report.json").read_text())
+    fails = [f for run in report["runs"].values() for r in run["radars"].values()
+             for f in r["failures"]]
+    assert [(f["frame_id"], f["position"]) for f in fails] == [(1, -1)]
     assert sorted(p.name for p in (out / "cascade" / "heatmaps" / "data").iterdir()) == [
         "heatmap_0.bin", "heatmap_2.bin"]
     with warnings.catch_warnings():

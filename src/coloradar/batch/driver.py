@@ -203,8 +203,16 @@ def _plan_run(t: RunTarget, opts: ProcessingJob) -> _RunJob:
         hcfg = RadarProcessor(rc, opts.settings).heatmap_config()
         made = RadarProducts(radar, rec, calibration_fingerprint(rc), heatmap_nbytes(hcfg.shape),
                              format_heatmap_cfg(hcfg), input_versions(stream))
-        job.radars.append(_RadarJob(made, stream, positions,
-                                    RadarOutcome(frames=len(positions))))
+        outcome = RadarOutcome(frames=len(positions))
+        if opts.frames is None:
+            # A frame file whose time is not a number cannot be placed in the output's
+            # timeline: it is not processed, and said as a failed frame (position -1: it is
+            # not in the stream), so that the job does not end as if all were well.
+            outcome.frames += len(stream.untimed)
+            outcome.failures += [FrameFailure(-1, fid, path, "FormatError",
+                                              "its timestamp is not a finite number")
+                                 for fid, path in stream.untimed]
+        job.radars.append(_RadarJob(made, stream, positions, outcome))
         job.outcome.radars[radar] = job.radars[-1].outcome
     return job
 

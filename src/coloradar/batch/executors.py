@@ -112,7 +112,12 @@ class SerialExecutor(Executor):
         _check_errors(errors)
         for task in tasks:
             try:
-                result = fn(task)
+                # The task reopens data the caller opened and warned about already (as pool
+                # workers do, see _init_worker): the same warning twice would read as two faults.
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", DataWarning)
+                    warnings.simplefilter("ignore", CalibrationWarning)
+                    result = fn(task)
             except Exception as exc:
                 if errors == "raise":
                     raise

@@ -170,11 +170,16 @@ class FrameStream:
         Those of ``issues`` that are faults of the timestamps file (a non-finite value, whose
         frame is left out; duplicated or decreasing timestamps, kept): ``coloradar info``
         marks them and exits 1.
+    untimed
+        ``(frame number, file)`` of each frame file left out because its timestamp is not a
+        finite number (the file as a path or ``archive.zip:member``): ``coloradar process``
+        reports each as a failed frame.
     """
 
     def __init__(self, name: str, source: Source, paths: list[str], timestamps: np.ndarray,
                  frame_ids: np.ndarray, decode: Decoder, issues: list[str] | None = None,
-                 timestamp_faults: list[str] | None = None):
+                 timestamp_faults: list[str] | None = None,
+                 untimed: list[tuple[int, str]] | None = None):
         self.name = name
         self._source = source
         self._paths = paths
@@ -183,6 +188,7 @@ class FrameStream:
         self._decode = decode
         self.issues = list(issues or [])
         self.timestamp_faults = list(timestamp_faults or [])
+        self.untimed = list(untimed or [])
 
     def __len__(self) -> int:
         return len(self._paths)
@@ -258,7 +264,7 @@ class FrameStream:
             idx = range(len(self._paths))[key]
             return FrameStream(self.name, self._source, [self._paths[i] for i in idx],
                                self.timestamps[key], self.frame_ids[key], self._decode,
-                               self.issues, self.timestamp_faults)
+                               self.issues, self.timestamp_faults, self.untimed)
         return self.read(operator.index(key))
 
     def __iter__(self) -> Iterator[np.ndarray]:
@@ -328,8 +334,9 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
         warnings.warn(f"{src.describe(folder)}: {issues[-1]}", DataWarning, stacklevel=3)
     keep = wanted[has][finite]
     paths = [f"{data_dir}/{prefix}_{i}.bin" for i in keep]
+    untimed = [(int(i), src.describe(f"{data_dir}/{prefix}_{i}.bin")) for i in wanted[has][~finite]]
     return FrameStream(name, src, paths, ts[has][finite].copy(), keep, decode, issues + faults,
-                       faults)
+                       faults, untimed)
 
 
 @dataclass(frozen=True, eq=False)
