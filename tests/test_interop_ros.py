@@ -229,7 +229,9 @@ def test_import_foreign_bag_with_topic_map_and_tf_chain(tmp_path):
             w.write(c_pts, (t0 + k) * 10**9, ts.serialize_cdr(cloud, "sensor_msgs/msg/PointCloud2"))
 
     with pytest.warns(DataWarning, match=r"/radar/detections has no field for intensity \(its fields: "
-                                         r"x, y, z, velocity\)"):
+                                         r"x, y, z, velocity\)"), \
+            pytest.warns(CalibrationWarning, match=r"preset extrinsics .* for cascade, imu, lidar, "
+                                                   r"vicon: the bag's /tf_static gave none"):
         imp = import_bag(path, tmp_path / "ds", topics={"/radar/detections": "single_chip/pointclouds",
                                                         "/tf_static": "tf_static"},
                          base_frame="base_link")
@@ -246,6 +248,8 @@ def test_import_foreign_bag_with_topic_map_and_tf_chain(tmp_path):
     m2[:3, :3], m2[:3, 3] = Rotation.from_quat(q2).as_matrix(), (0.0, 0.2, 0.0)
     assert np.allclose(seq.calib.transforms["single_chip"].matrix(), m1 @ m2, atol=1e-12)
     assert imp.extrinsics == ["single_chip"]
+    # The other sensors' extrinsics in the calib just written are the presets: said, kept apart.
+    assert imp.preset_extrinsics == ["cascade", "imu", "lidar", "vicon"]
 
     with pytest.raises(FormatError, match="carries sensor_msgs/msg/PointCloud2"):
         import_bag(path, tmp_path / "ds2", topics={"/radar/detections": "imu"})

@@ -70,6 +70,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {stream:<24} {n:>7}  from {res.topics[stream]}")
     print(f"  calib: {res.calib_path} ({'written' if res.calib_written else 'kept'}; extrinsics "
           f"from /tf_static: {', '.join(res.extrinsics) or 'none'})")
+    if res.preset_extrinsics:
+        print(f"  preset extrinsics (not from this bag) written for: "
+              f"{', '.join(res.preset_extrinsics)}")
     if res.extrinsics_not_applied:
         print(f"  NOT applied (the kept calib differs): bag extrinsics of "
               f"{', '.join(res.extrinsics_not_applied)}")

@@ -83,6 +83,10 @@ class ImportResult:
         Stream -> topic it came from.
     extrinsics
         Sensors whose ``base_T_sensor`` came from the bag's ``/tf_static``.
+    preset_extrinsics
+        Sensors whose extrinsic in the written ``calib_path`` is a built-in preset (the
+        ColoRadar rig's), because the bag's ``/tf_static`` did not give it (a
+        :class:`CalibrationWarning` says so).
     extrinsics_not_applied
         Sensors whose ``/tf_static`` extrinsic differs from the kept calibration's (a
         :class:`CalibrationWarning` says so): the imported run is read with the kept one.
@@ -102,6 +106,7 @@ class ImportResult:
     topics: dict[str, str] = field(default_factory=dict)
     extrinsics: list[str] = field(default_factory=list)
     extrinsics_not_applied: list[str] = field(default_factory=list)
+    preset_extrinsics: list[str] = field(default_factory=list)
     ignored: dict[str, str] = field(default_factory=dict)
     disjoint: list[tuple[str, str]] = field(default_factory=list)
     seconds: float = 0.0
@@ -542,6 +547,15 @@ def _finish(job: _Import, found: dict[str, Extrinsic]) -> None:
         write_calibration(merged, tmp_calib)
         os.replace(tmp_calib, calib_dir)
         result.calib_written = True
+        if calib is None:
+            # Once written, preset values look like the rig's own to every later reader: this
+            # is the one moment a user can be told which they are.
+            result.preset_extrinsics = sorted(set(merged.transforms) - set(found))
+            if result.preset_extrinsics:
+                warnings.warn(f"{calib_dir}: written with the built-in preset extrinsics (the "
+                              f"ColoRadar rig's) for {', '.join(result.preset_extrinsics)}: the "
+                              "bag's /tf_static gave none for them; replace those files "
+                              "with your rig's", CalibrationWarning, stacklevel=3)
     elif found:
         result.calib_path = calib_dir if calib_dir.exists() else root / "calib.zip"
         result.extrinsics_not_applied = _differing_extrinsics(result.calib_path, found)
