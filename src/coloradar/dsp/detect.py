@@ -81,12 +81,21 @@ def local_maxima(power: np.ndarray, mode: CFAREdge | tuple[CFAREdge, ...]) -> np
     return power >= maximum_filter(power, size=3, mode=mode)
 
 
-def channel_noise(power: np.ndarray, first_range: int = 0) -> np.ndarray:
+NOISE_CELLS = 1024
+"""Cells per channel that :func:`channel_noise` takes its median over (at most)."""
+
+
+def channel_noise(power: np.ndarray, first_range: int = 0,
+                  max_cells: int = NOISE_CELLS) -> np.ndarray:
     """Noise power of every channel of a range–Doppler power cube, robust to targets.
 
-    The median cell power over all Doppler bins and the range bins from ``first_range`` on,
+    The median cell power over the Doppler bins and the range bins from ``first_range`` on,
     divided by ``ln 2`` (the median of an exponential of mean σ² is ``σ²·ln 2``): targets and
-    clutter that fill less than half the cells do not move it much.
+    clutter that fill less than half the cells do not move it much. The median is taken over
+    every k-th cell, k chosen so that at most ``max_cells`` cells are used: the sample median
+    of n exponential cells has a relative standard deviation of ``1/(√n·ln 2)``, 4.5 % at
+    n = 1024, which whitening weights do not need to beat (the CFAR normalises each cell by its
+    own training cells), while the selection over every cell cost as much as the range FFT.
 
     Parameters
     ----------
@@ -94,6 +103,8 @@ def channel_noise(power: np.ndarray, first_range: int = 0) -> np.ndarray:
         float ``(channels, doppler, range)``: ``|·|²`` of each channel.
     first_range
         First range bin used (near bins hold coupling residue).
+    max_cells
+        Most cells per channel the median is taken over.
 
     Returns
     -------
@@ -104,6 +115,11 @@ def channel_noise(power: np.ndarray, first_range: int = 0) -> np.ndarray:
     cells = power[:, :, first_range:].reshape(c, -1)
     if cells.shape[1] == 0:
         cells = power.reshape(c, -1)
+    step = -(-cells.shape[1] // max(int(max_cells), 1))
+    if step > 1:
+        # Every k-th cell of the flattened (Doppler, range) grid spreads over both axes; k odd
+        # so that an even range length does not keep the same parity of range bins throughout.
+        cells = cells[:, :: step | 1]
     mid = cells.shape[1] // 2
     med = np.partition(cells, mid, axis=1)[:, mid].astype(np.float64)
     return np.maximum(med / np.log(2.0), np.finfo(np.float64).tiny)
