@@ -164,7 +164,10 @@ class ProcessingSettings:
         at one range and range rate, as a wall on each side of a corridor): a secondary peak
         counts when, with the strongest source's response (its sidelobes) removed, what is
         left in its direction is above the beam noise at ``angle_pfa`` and within
-        ``angle_dynamic_range_db`` of the strongest. False: one point per cell.
+        ``angle_dynamic_range_db`` of the strongest, and, once the cell's sources are fitted
+        jointly, it stands out of what that fit leaves (an F-test at ``angle_pfa`` with the
+        residual as the noise: model error of extended surfaces counts as noise there).
+        False: one point per cell.
     angle_pfa
         Probability that noise alone makes a secondary angle peak in a cell.
     angle_dynamic_range_db
