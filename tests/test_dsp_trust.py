@@ -133,6 +133,59 @@ def test_a_target_one_doppler_bin_from_a_stronger_one_is_kept(radars, name):
     assert hits >= 9, hits
 
 
+def wall_patch_scene(g: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Four point targets in four range cells (2-5 m, +-45 deg, 20-30 dB) and two wall patches
+    (left and right, as a corridor's walls), each a 1.2 m x 0.15 m vertical strip of
+    scatterers 0.15 m apart (10-25 dB each): extended targets whose range cells hold several
+    scatterers at one azimuth sine and many elevations (as the simulator's surfaces).
+    Returns (positions, snr_db, is_point)."""
+    rs = 2.0 + 0.8 * np.arange(4) + g.uniform(0, 0.3, 4)
+    az = g.permutation(np.linspace(-45, 45, 4)) + g.uniform(-5, 5, 4)
+    pos = [r * direction(a, g.uniform(-10, 10)) for r, a in zip(rs, az, strict=True)]
+    snr = list(g.uniform(20, 30, 4))
+    for side in (-1, 1):
+        y, x0 = side * g.uniform(1.0, 2.0), g.uniform(3.0, 5.0)
+        for z in np.arange(-0.6, 0.61, 0.15):
+            for dx in (0.0, 0.15):
+                pos.append(np.array([x0 + dx, y, z]))
+                snr.append(g.uniform(10, 25))
+    return np.array(pos), np.array(snr), np.arange(len(pos)) < 4
+
+
+@pytest.mark.parametrize(("name", "limit"), [("cascade", 8), ("single_chip", 8)])
+def test_few_points_off_every_scatterer_beside_an_extended_target(radars, name, limit):
+    """Precision on 8 frames (noise, four point targets, two wall patches): points farther
+    than 0.3 m from every scatterer (spurious angle peaks, elevation ghosts of the patches'
+    cells, noise) stay at <= 1 a frame, and the point targets are found (cascade: >= 30 of 32
+    within 0.3 m; the single chip's two elevation rows put some of them > 0.3 m off).
+
+    The cascade focuses its beams (``near_field=True``): these frames are spherical waves
+    with no near-reflector calibration, and far-field beams on its 16 cm aperture leave
+    shoulders (docs/dsp.md, "Near field"). Measured when written: 4 spurious points in 8
+    frames on each radar; with a lax angle test (``angle_pfa=0.3``,
+    ``angle_dynamic_range_db=30``) the cascade makes 22.
+    """
+    from scipy.spatial import cKDTree
+
+    calib = radars[name]
+    proc = RadarProcessor(calib, coupling_subtraction=False, near_field=name == "cascade")
+    g = np.random.default_rng(100)
+    spurious, found_points = 0, 0
+    for i in range(8):
+        pos, snr, point = wall_patch_scene(g)
+        det = proc.detect(frame(calib, pos, snr, seed=i, phases=g.uniform(0, 2 * np.pi,
+                                                                          len(pos))))
+        if len(det) == 0:
+            continue
+        dist, _ = cKDTree(pos).query(det.xyz)
+        spurious += int(np.sum(dist > 0.3))
+        near, _ = cKDTree(det.xyz).query(pos[point])
+        found_points += int(np.sum(near <= 0.3))
+    assert spurious <= limit, spurious
+    if name == "cascade":
+        assert found_points >= 30, found_points         # (a patch may share a target's cell)
+
+
 # --------------------------------------------------------------------- range from the origin
 @pytest.mark.parametrize("name", ["cascade", "single_chip"])
 def test_range_is_measured_from_the_radar_origin_at_every_azimuth(radars, name):

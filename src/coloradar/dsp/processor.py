@@ -27,6 +27,7 @@ from typing import Any, Literal, get_args
 import numpy as np
 import scipy.fft as sfft
 from scipy.ndimage import maximum_filter
+from scipy.stats import f as f_dist
 
 from ..calib import HeatmapConfig, RadarCalib
 from ..calib.waveform import SPEED_OF_LIGHT
@@ -163,7 +164,10 @@ class ProcessingSettings:
         at one range and range rate, as a wall on each side of a corridor): a secondary peak
         counts when, with the strongest source's response (its sidelobes) removed, what is
         left in its direction is above the beam noise at ``angle_pfa`` and within
-        ``angle_dynamic_range_db`` of the strongest. False: one point per cell.
+        ``angle_dynamic_range_db`` of the strongest, and, once the cell's sources are fitted
+        jointly, it stands out of what that fit leaves (an F-test at ``angle_pfa`` with the
+        residual as the noise: model error of extended surfaces counts as noise there).
+        False: one point per cell.
     angle_pfa
         Probability that noise alone makes a secondary angle peak in a cell.
     angle_dynamic_range_db
@@ -451,6 +455,11 @@ class RadarProcessor:
         # (exponential beam power; about one independent beam per unique element).
         dg = self.detection_grid
         self._angle_floor = float(np.log(dg.num_elements / s.angle_pfa))
+        # F(2, 2ν) quantiles at angle_pfa/M for ν = 0..M complex degrees of freedom left
+        # (index 0 unused): the residual test of _residual_floor.
+        nu = np.arange(dg.num_elements + 1)
+        self._f_threshold = np.r_[np.inf, f_dist.isf(s.angle_pfa / dg.num_elements, 2,
+                                                     2 * nu[1:])]
         self._angle_dynamic = 10.0 ** (-s.angle_dynamic_range_db / 10)
         self._alias_margin = 10.0 ** (-s.alias_margin_db / 10)
         self._visible_az = np.abs(dg.az_sines) <= 1.0
@@ -924,19 +933,22 @@ class RadarProcessor:
         uy, uz, peak, w, ci, x, rho, rank, cell_of = (
             uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep], x[keep], rho[keep],
             rank[keep], cell_of[keep])
-        for _ in range(2):
+        for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
             starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
             top = np.maximum.reduceat(pw, starts)
             ok = (pw >= floor[ci]) & (pw >= top[cell_of] * self._angle_dynamic)
+            if it > 0:
+                # once the directions are refined jointly, against what the fit leaves
+                ok &= pw >= self._residual_floor(x, w, amps, cell_of, starts)
             ok[rank == 0] = True
             uy, uz, peak, w, ci, x, rho, amps = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok],
                                                  x[ok], rho[ok], amps[ok])
             _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
             rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
             multi = count[cell_of] > 1
-            if not multi.any():
+            if not multi.any() or it == 2:
                 break
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             model = np.conj(w) * amps[None, :]                          # (M, P) fitted sources
@@ -953,6 +965,37 @@ class RadarProcessor:
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
         return uy, uz, peak, w, ci
+
+    def _residual_floor(self, x: np.ndarray, w: np.ndarray, amps: np.ndarray,
+                        cell_of: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """Power a source of a cell must reach against what the cell's joint fit leaves.
+
+        The generalised likelihood-ratio test of one more source when the noise level is
+        unknown: the cell's vector ``x`` (M unique elements) less the fit of its ``n``
+        sources leaves ``RSS``, an estimate ``σ̂² = RSS/ν`` of the per-element noise with
+        ``ν = M − 2n`` complex degrees of freedom (each source: a complex amplitude and two
+        direction sines). A source's least-squares power ``|s|²`` then has
+        ``M|s|²/σ̂² ~ F(2, 2ν)`` under noise alone, and the test, taken over about M
+        independent beams, keeps it at ``angle_pfa``. On thermal noise alone ``σ̂²`` is the
+        noise and the test is the beam-noise floor; where the cell holds more than its point
+        sources explain (an extended surface, several scatterers within a resolution cell),
+        what is left is model error, and a secondary peak must stand out of it — else its
+        elevation, measured by the cascade's 48 off-row elements against that error, lands
+        anywhere (docs/dsp.md, "Several scatterers in one cell").
+
+        Returns
+        -------
+        numpy.ndarray
+            float64 ``(P,)``: the power floor of each source in beam units (``|s|²``).
+        """
+        m = w.shape[0]
+        model = np.conj(w) * amps[None, :]                              # (M, P)
+        total = np.add.reduceat(model.T, starts, axis=0)                # (C, M)
+        first = x[starts]                                               # each cell's vector
+        rss = np.sum(np.abs(first - total) ** 2, axis=1)                # (C,)
+        count = np.diff(np.r_[starts, cell_of.size])
+        nu = np.maximum(m - 2 * count, 1)
+        return (self._f_threshold[nu] * rss / nu / m)[cell_of]
 
     def _elevation_search(self, x: np.ndarray, uy: np.ndarray, rho: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray]:
