@@ -4,7 +4,9 @@
 A block is a fenced code block (```lang ... ```). The HTML comment
 ``<!-- doc-test: skip (reason) -->`` on the last non-blank line before a block marks a block
 that cannot run here (real data, a Dask cluster, ``pip install``, a benchmark); the reason is
-required. Every other block must be a ```python block (executed) or a transcript: lines
+required. ``<!-- doc-test: needs (numba, matplotlib) -->`` marks a block whose output depends
+on optional extras: it runs where those modules import, and is skipped elsewhere. Every other
+block must be a ```python block (executed) or a transcript: lines
 ``$ command`` each followed by the output it prints (run, and the output compared).
 
 Output comparison, line by line, whitespace runs ignored: words, punctuation, names and
@@ -57,8 +59,16 @@ class Block:
         return out
 
     @property
+    def needs(self) -> list[str]:
+        """Modules a ``<!-- doc-test: needs (numba, matplotlib) -->`` block needs: its output
+        depends on optional extras, so it is skipped where one is missing."""
+        if self.marker != "needs":
+            return []
+        return [m.strip() for m in self.reason.split(",") if m.strip()]
+
+    @property
     def kind(self) -> str:
-        if self.marker:
+        if self.marker and self.marker != "needs":
             return self.marker
         if self.lang == "python":
             return "python"

@@ -11,7 +11,9 @@ that the docs cannot drift from what the code does.
   doc shows (rules in ``tests/_docblocks.py``: text, names, columns and counts exact, figures
   within 5 %, timings and rates free).
 - Blocks that cannot run here carry ``<!-- doc-test: skip (reason) -->`` on the line before
-  them; every other block must run.
+  them; blocks whose output depends on optional extras (the demo's heatmap engine and
+  pictures) carry ``<!-- doc-test: needs (numba, matplotlib) -->`` and run where those import;
+  every other block must run.
 
 The shared dataset is made once, by the docs' own command
 ``coloradar simulate data --scene courtyard --duration 6 --seed 1`` (its output is compared
@@ -22,6 +24,7 @@ date is the simulator's fixed default start time) and ``data/calib``.
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
 import os
 import shlex
@@ -181,6 +184,9 @@ def _check_block(block: Block, shared: dict, monkeypatch) -> None:
     if block.kind == "skip":
         assert block.reason, f"{block.id}: a skip marker must give its reason: (reason)"
         pytest.skip(f"{block.id}: {block.reason}")
+    missing = [m for m in block.needs if importlib.util.find_spec(m) is None]
+    if missing:
+        pytest.skip(f"{block.id}: its output needs {', '.join(missing)} (not installed)")
     if block.kind == "unmarked":
         pytest.fail(f"{block.id}: a ```{block.lang or ''} block that is neither Python nor a "
                     "`$ coloradar ...` transcript; run it or mark it "
@@ -190,7 +196,7 @@ def _check_block(block: Block, shared: dict, monkeypatch) -> None:
     elif block.kind == "transcript":
         _run_transcript(block, shared, monkeypatch)
     else:
-        pytest.fail(f"{block.id}: unknown doc-test marker {block.kind!r} (known: skip)")
+        pytest.fail(f"{block.id}: unknown doc-test marker {block.kind!r} (known: skip, needs)")
 
 
 # -- the comparison itself ------------------------------------------------------------------------
