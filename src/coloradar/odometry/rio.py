@@ -6,7 +6,9 @@
    ego-speed and the IMU's quietness; nobody says when the rig stands still.
 2. **Initialisation** at the first usable radar frame: attitude from gravity
    (:mod:`.gravity`; motion removed with the radar's velocities when the rig already moves),
-   gyro bias from the mean rate when that frame is static, velocity from the radar.
+   gyro bias from the mean rate when that frame is static, velocity from the radar; a moving
+   start only from a frame the next one corroborates within what the IMU allows
+   (:func:`_consistent`).
 3. **Propagation** with every IMU sample (:meth:`.ErrorStateEKF.propagate`).
 4. **Updates**, in time order over all radars: a static frame gives a zero-velocity update
    (``v = 0``, σ ``zupt_std``) and a zero-rate update of the gyro bias (the mean rate of the IMU
