@@ -48,11 +48,6 @@ OPTIONAL = {"torch", "rerun", "distributed", "dask"}
 # (file, first line of the block): run, and reported as xfail while they fail; one that runs
 # as shown fails the test until its entry is removed.
 KNOWN_DRIFT: dict[tuple[str, str], str] = {
-    ("README.md", "$ coloradar odometry data/11_21_2026_sim_courtyard_run1 --out odo"):
-        "the odometry figures shown are not what the commands print (issue 17)",
-    ("docs/odometry.md", "$ coloradar simulate sim --duration 30 --seed 3 --sensors "
-                         "cascade,imu,groundtruth --quiet"):
-        "the simulate output is not shown; a 30 s simulation costs about a minute",
 }
 
 BLOCKS = [b for f in DOC_FILES for b in extract_blocks(ROOT / f, f)]

@@ -156,7 +156,8 @@ def evaluate_odometry(folder: str | os.PathLike[str], run: str | os.PathLike[str
     estimate = read_tum(folder / TRAJECTORY_FILE)
     track = read_velocity_table(folder / VELOCITY_FILE) if (folder / VELOCITY_FILE).is_file() \
         else None
-    meta = {k: info[k] for k in ("radar", "source", "orientation") if k in info}
+    meta = {k: info[k] for k in ("radar", "source", "estimator", "orientation", "fuse")
+            if k in info}
     meta.update(run=str(run), run_name=seq.name, folder=str(folder))
     return evaluate_trajectory(estimate, reference, track=track, calib=seq.calib, align=align,
                                distances=distances, max_gap=max_gap, info=meta,
@@ -197,6 +198,18 @@ def evaluation_dict(ev: Evaluation) -> dict:
     return out
 
 
+def _method(info: dict) -> str:
+    """What made the estimate: the EKF has no separate attitude source (it integrates the IMU
+    itself), dead reckoning names its attitude; files written before the EKF existed (no
+    ``estimator``) were dead reckoning."""
+    est, att = info.get("estimator"), info.get("orientation")
+    if est is not None and est != "dead-reckoning":
+        fused = [str(r) for r in info.get("fuse") or []]
+        return f"estimator {est}" + (f" (fused {', '.join(fused)})" if fused else "")
+    parts = [f"estimator {est}" if est else "", f"attitude {att}" if att else ""]
+    return " · ".join(x for x in parts if x)
+
+
 def format_evaluation(ev: Evaluation) -> str:
     """A plain-text table of the evaluation (what ``coloradar evaluate`` prints)."""
     i = ev.info
@@ -204,7 +217,7 @@ def format_evaluation(ev: Evaluation) -> str:
         f"run {i['run_name']}" if "run_name" in i else "",
         f"{i['radar']} radar" if "radar" in i else "",
         f"source {i['source']}" if "source" in i else "",
-        f"attitude {i['orientation']}" if "orientation" in i else "") if x)
+        _method(i)) if x)
     lines = [head] if head else []
     rows: list[tuple[str, str]] = []
     if ev.velocity is not None:

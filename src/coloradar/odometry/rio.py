@@ -6,7 +6,9 @@
    ego-speed and the IMU's quietness; nobody says when the rig stands still.
 2. **Initialisation** at the first usable radar frame: attitude from gravity
    (:mod:`.gravity`; motion removed with the radar's velocities when the rig already moves),
-   gyro bias from the mean rate when that frame is static, velocity from the radar.
+   gyro bias from the mean rate when that frame is static, velocity from the radar; a moving
+   start only from a frame the next one corroborates within what the IMU allows
+   (:func:`_consistent`).
 3. **Propagation** with every IMU sample (:meth:`.ErrorStateEKF.propagate`).
 4. **Updates**, in time order over all radars: a static frame gives a zero-velocity update
    (``v = 0``, σ ``zupt_std``) and a zero-rate update of the gyro bias (the mean rate of the IMU
@@ -209,6 +211,39 @@ def _initial_motion(track: EgoVelocityTrack, sel: np.ndarray, ekf: ErrorStateEKF
     return u[0], slope + np.cross(w.mean(0), u.mean(0))
 
 
+def _imu_frame_velocity(track: EgoVelocityTrack, k: int, ekf: ErrorStateEKF, t_ir: np.ndarray,
+                        r_ir: np.ndarray, td: float) -> np.ndarray:
+    """Frame ``k``'s radar velocity as the IMU origin's velocity in the IMU frame."""
+    _, w = ekf.imu_at(float(track.timestamps[k] + td))
+    return r_ir @ track.velocity[k] - np.cross(w, t_ir)
+
+
+def _consistent(track: EgoVelocityTrack, k: int, j: int, ekf: ErrorStateEKF, t_ir: np.ndarray,
+                r_ir: np.ndarray, td: float, floor: float, gate: float) -> bool:
+    """Whether frames ``k`` and ``j`` of one radar can both be right, whatever the attitude.
+
+    In the IMU frame ``du/dt = f + Rᵀg − ω × u``; ``|Rᵀg| = g`` whatever ``R``, so
+    ``u_j − u_k − ∫(f − ω × u_k) dt`` lies within ``g·|t_j − t_k|`` of zero (biases and the
+    change of ``ω × u`` are small beside it). Beyond that, plus ``gate`` standard deviations
+    of the two measurements, one of them is wrong. A bound from physics, no tuned constant:
+    it catches gross errors (a cloud fitted by an alias of the true motion, metres per
+    second off), which would otherwise seed the filter's velocity and gravity alignment.
+    """
+    ta, tb = sorted((float(track.timestamps[k] + td), float(track.timestamps[j] + td)))
+    ts = ekf.imu_t
+    inner = ts[(ts > ta) & (ts < tb)]
+    tg = np.concatenate([[ta], inner, [tb]])
+    f, w = ekf.imu_at(tg)
+    uk = _imu_frame_velocity(track, k, ekf, t_ir, r_ir, td)
+    uj = _imu_frame_velocity(track, j, ekf, t_ir, r_ir, td)
+    g = f - np.cross(w, uk)
+    sign = 1.0 if j > k else -1.0
+    integral = sign * np.trapezoid(g, tg, axis=0)
+    cov = track.covariance[k] + track.covariance[j] + 2 * floor**2 * np.eye(3)
+    sigma = float(np.sqrt(np.max(np.linalg.eigvalsh(cov))))
+    return bool(np.linalg.norm(uj - uk - integral) <= _G0 * (tb - ta) + gate * sigma)
+
+
 def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
                  imu_timestamps: np.ndarray, imu_data: np.ndarray, *,
                  radars: Sequence[str] | None = None, config: RioConfig | None = None,
@@ -287,7 +322,19 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     if usable.size == 0:
         raise ColoradarError(f"{prim.frame}: no radar frame with a usable ego-velocity lies "
                              "within the IMU's time span; nothing to filter")
-    k0 = int(usable[0])
+    gate_sigma = float(np.sqrt(chi2.ppf(cfg.gate_probability, 3))) \
+        if cfg.gate_probability < 1 else np.inf
+    meas = np.flatnonzero(inside & measured)
+
+    def corroborated(k: int) -> bool:
+        # A moving start takes the frame's velocity as the filter's: the next measured frame
+        # must agree with it as far as the IMU allows (see _consistent).
+        nxt = meas[meas > k]
+        return static[0][k] or nxt.size == 0 or _consistent(
+            prim, k, int(nxt[0]), ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset,
+            cfg.velocity_noise_floor, gate_sigma)
+
+    k0 = next((int(k) for k in usable if corroborated(int(k))), int(usable[0]))
     if k0 > 0 or not inside.all():
         dropped = int(k0 + (~inside[k0:]).sum())
         warnings.warn(f"{prim.frame}: {dropped} of {len(prim)} radar frames lie before the "
@@ -314,6 +361,9 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     else:
         tt = prim.timestamps + cfg.time_offset
         sel = np.flatnonzero(measured & inside & (tt >= t0) & (tt <= t0 + cfg.align_window))
+        sel = np.array([j for j in sel if j == k0 or _consistent(
+            prim, k0, int(j), ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset,
+            cfg.velocity_noise_floor, gate_sigma)], dtype=np.int64)
         u0, a_b = _initial_motion(prim, sel, ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset)
         ekf.R = gravity_alignment(f_win, a_b)
         ekf.v = ekf.R @ u0
