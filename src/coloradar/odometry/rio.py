@@ -29,6 +29,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.integrate import trapezoid  # numpy.trapezoid needs numpy >= 2
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
@@ -238,7 +239,7 @@ def _consistent(track: EgoVelocityTrack, k: int, j: int, ekf: ErrorStateEKF, t_i
     uj = _imu_frame_velocity(track, j, ekf, t_ir, r_ir, td)
     g = f - np.cross(w, uk)
     sign = 1.0 if j > k else -1.0
-    integral = sign * np.trapezoid(g, tg, axis=0)
+    integral = sign * trapezoid(g, tg, axis=0)
     cov = track.covariance[k] + track.covariance[j] + 2 * floor**2 * np.eye(3)
     sigma = float(np.sqrt(np.max(np.linalg.eigvalsh(cov))))
     return bool(np.linalg.norm(uj - uk - integral) <= _G0 * (tb - ta) + gate * sigma)
