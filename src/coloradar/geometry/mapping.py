@@ -82,25 +82,35 @@ class VoxelAccumulator:
     Each added cloud is reduced to its per-voxel centroids (:func:`voxel_downsample`), which
     are summed into the map's voxels; :meth:`points` is, per voxel, the mean of the centroids
     of the clouds that saw it (every cloud counting once, however many of its points fell in
-    the voxel). Memory is that of the occupied voxels (``C + 1`` float64 and one int64 key
-    each), whatever the number of clouds: a map of a long run costs what its extent costs.
+    the voxel), and :meth:`counts` the number of those clouds. Memory is that of the occupied
+    voxels (``C + 1`` float64 and one int64 key each), whatever the number of clouds: a map of
+    a long run costs what its extent costs.
 
     Parameters
     ----------
     voxel_size
         Edge of a cubic voxel [m]; voxel ``k`` covers ``[k·size, (k+1)·size)`` on each axis.
+    flush_every
+        Clouds' voxels wait in a batch and are merged into the map (one sort) once more are
+        waiting than the larger of this and the map's own size: the merge costs O(log M) per
+        voxel added, and the waiting voxels never outnumber the map's by much.
     """
 
-    def __init__(self, voxel_size: float):
+    def __init__(self, voxel_size: float, flush_every: int = 1 << 16):
         if not voxel_size > 0:
             raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
         self.voxel_size = float(voxel_size)
+        self.clouds = 0
         self._keys = np.zeros(0, dtype=np.int64)        # sorted, one per occupied voxel
         self._sums: np.ndarray | None = None            # float64 (M, C)
         self._counts = np.zeros(0, dtype=np.int64)
         self._dtype: np.dtype = np.dtype(np.float32)
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []
+        self._pending_n = 0
+        self._flush_every = max(1, int(flush_every))
 
     def __len__(self) -> int:
+        self._flush()
         return int(self._keys.size)
 
     def _key(self, xyz: np.ndarray) -> np.ndarray:
@@ -113,6 +123,7 @@ class VoxelAccumulator:
 
     def add(self, points: np.ndarray) -> None:
         """Add one cloud, float ``(N, C)`` x y z first [m] (non-finite points are dropped)."""
+        self.clouds += 1
         cen = voxel_downsample(np.asarray(points), self.voxel_size)
         if cen.shape[0] == 0:
             return
@@ -122,25 +133,51 @@ class VoxelAccumulator:
         elif cen.shape[1] != self._sums.shape[1]:
             raise SettingsError(f"a cloud of {cen.shape[1]} columns added to a map of "
                                 f"{self._sums.shape[1]}")
-        keys = self._key(cen[:, :3])  # one per voxel of this cloud: unique already
-        pos = np.searchsorted(self._keys, keys)
-        hit = pos < self._keys.size
-        hit[hit] = self._keys[pos[hit]] == keys[hit]
-        self._sums[pos[hit]] += cen[hit]
-        self._counts[pos[hit]] += 1
-        new = ~hit
-        if new.any():
-            # Insert the new voxels in key order: one merge, O(M) per cloud.
-            self._keys = np.insert(self._keys, pos[new], keys[new])
-            self._sums = np.insert(self._sums, pos[new], cen[new].astype(np.float64), axis=0)
-            self._counts = np.insert(self._counts, pos[new], 1)
+        # One key per voxel of this cloud (unique already); the voxel is keyed by the cloud's
+        # centroid, which lies inside it.
+        self._pending.append((self._key(cen[:, :3]), cen.astype(np.float64)))
+        self._pending_n += cen.shape[0]
+        if self._pending_n > max(self._keys.size, self._flush_every):
+            self._flush()
+
+    def _flush(self) -> None:
+        if not self._pending or self._sums is None:
+            return
+        keys = np.concatenate([self._keys, *(k for k, _ in self._pending)])
+        sums = np.concatenate([self._sums, *(c for _, c in self._pending)])
+        counts = np.concatenate([self._counts,
+                                 *(np.ones(k.size, dtype=np.int64) for k, _ in self._pending)])
+        self._pending, self._pending_n = [], 0
+        self._keys, inv = np.unique(keys, return_inverse=True)
+        inv = np.asarray(inv).reshape(-1)
+        m = self._keys.size
+        # bincount adds in array order: the map's sum first, then each cloud in turn.
+        self._sums = np.stack([np.bincount(inv, weights=sums[:, j], minlength=m)
+                               for j in range(sums.shape[1])], axis=1)
+        self._counts = np.bincount(inv, weights=counts, minlength=m).astype(np.int64)
 
     def points(self) -> np.ndarray:
         """``(M, C)`` one point per occupied voxel (the mean of its clouds' centroids), in
         the dtype of the clouds added, ordered by voxel (x, then y, then z)."""
+        self._flush()
         if self._sums is None:
             return np.zeros((0, 3), dtype=np.float32)
         return (self._sums / self._counts[:, None]).astype(self._dtype)
+
+    def counts(self) -> np.ndarray:
+        """int64 ``(M,)``: the number of clouds that put a point in each voxel (order of
+        :meth:`points`)."""
+        self._flush()
+        return self._counts.copy()
+
+    def voxel_indices(self) -> np.ndarray:
+        """int64 ``(M, 3)``: voxel ``(i, j, k)`` of each occupied voxel (order of
+        :meth:`points`); its centre is ``(ijk + ½)·voxel_size``."""
+        self._flush()
+        mask = (1 << _KEY_BITS) - 1
+        k = self._keys
+        return np.stack([(k >> (2 * _KEY_BITS)) & mask, (k >> _KEY_BITS) & mask, k & mask],
+                        axis=1) - _KEY_OFFSET
 
 
 def accumulate_clouds(clouds: Iterable[np.ndarray | None], poses: Iterable[SE3],

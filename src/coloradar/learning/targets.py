@@ -24,14 +24,10 @@ from scipy.spatial import cKDTree
 
 from ..calib import HeatmapConfig
 from ..errors import MissingDataError, SettingsError
-from ..geometry import SE3, Trajectory, sensor_to_base, trajectory_from_groundtruth
+from ..geometry import SE3, Trajectory, VoxelAccumulator, sensor_to_base, trajectory_from_groundtruth
 from .views import fov_mask
 
 __all__ = ["MapCut", "TargetSettings", "VoxelMap", "build_voxel_map", "frame_target", "prepare_cut"]
-
-_BITS = 21
-_OFFSET = 1 << (_BITS - 1)
-_MASK = (1 << _BITS) - 1
 
 
 @dataclass(frozen=True)
@@ -71,7 +67,9 @@ class TargetSettings:
 
 
 class VoxelMap:
-    """Occupied voxels of a world-frame map, streamed in scan by scan.
+    """Occupied voxels of a world-frame map, streamed in scan by scan: a
+    :class:`coloradar.geometry.VoxelAccumulator` (which holds only the occupied voxels) read as
+    hit counts and intensities.
 
     Parameters
     ----------
@@ -83,23 +81,14 @@ class VoxelMap:
         size, if larger): bounds the pending memory.
     """
 
-    def __init__(self, voxel_size: float = 0.1, flush_every: int = 1 << 20):
-        if not voxel_size > 0:
-            raise SettingsError(f"voxel_size must be positive, got {voxel_size}")
-        self.voxel_size = float(voxel_size)
-        self._keys: np.ndarray = np.zeros(0, dtype=np.int64)
-        self._hits: np.ndarray = np.zeros(0, dtype=np.int64)
-        self._isum: np.ndarray = np.zeros(0, dtype=np.float64)
-        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        self._pending_n = 0
-        self.scans = 0
-        self._flush_every = max(1, int(flush_every))
+    def __init__(self, voxel_size: float = 0.1, flush_every: int = 1 << 16):
+        self._acc = VoxelAccumulator(voxel_size, flush_every)
+        self.voxel_size = self._acc.voxel_size
 
-    def _pack(self, xyz: np.ndarray) -> np.ndarray:
-        ijk = np.floor(xyz / self.voxel_size).astype(np.int64) + _OFFSET
-        if ijk.size and (ijk.min() < 0 or ijk.max() > _MASK):
-            raise SettingsError(f"VoxelMap: a point lies beyond ±{_OFFSET * self.voxel_size:g} m")
-        return (ijk[:, 0] << (2 * _BITS)) | (ijk[:, 1] << _BITS) | ijk[:, 2]
+    @property
+    def scans(self) -> int:
+        """Scans added so far."""
+        return self._acc.clouds
 
     def add(self, points: np.ndarray) -> None:
         """Add one scan (world frame, float ``(N, ≥3)``; column 3 is intensity when present).
@@ -109,35 +98,13 @@ class VoxelMap:
         p = np.asarray(points)
         if p.ndim != 2 or p.shape[1] < 3:
             raise SettingsError(f"expected points of shape (N, >=3), got {p.shape}")
-        p = p[np.all(np.isfinite(p[:, :3]), axis=1)]
-        self.scans += 1
-        if p.shape[0] == 0:
-            return
-        keys, inv = np.unique(self._pack(p[:, :3].astype(np.float64)), return_inverse=True)
-        inten = p[:, 3].astype(np.float64) if p.shape[1] > 3 else np.zeros(p.shape[0])
-        # One hit per scan and voxel; the scan's mean intensity in that voxel.
-        isum = np.bincount(inv.reshape(-1), weights=inten, minlength=keys.size) / np.bincount(
-            inv.reshape(-1), minlength=keys.size)
-        self._pending.append((keys, np.ones(keys.size, dtype=np.int64), isum))
-        self._pending_n += keys.size
-        if self._pending_n > max(self._keys.size, self._flush_every):
-            self._flush()
-
-    def _flush(self) -> None:
-        if not self._pending:
-            return
-        keys = np.concatenate([self._keys, *(k for k, _, _ in self._pending)])
-        hits = np.concatenate([self._hits, *(h for _, h, _ in self._pending)])
-        isum = np.concatenate([self._isum, *(s for _, _, s in self._pending)])
-        self._pending, self._pending_n = [], 0
-        self._keys, inv_any = np.unique(keys, return_inverse=True)
-        inv = np.asarray(inv_any).reshape(-1)
-        self._hits = np.bincount(inv, weights=hits, minlength=self._keys.size).astype(np.int64)
-        self._isum = np.bincount(inv, weights=isum, minlength=self._keys.size)
+        inten = p[:, 3] if p.shape[1] > 3 else np.zeros(p.shape[0])
+        # x y z and intensity only: a voxel's 4th column is the mean over scans of each
+        # scan's mean intensity in it.
+        self._acc.add(np.column_stack([p[:, :3], inten]).astype(np.float64))
 
     def __len__(self) -> int:
-        self._flush()
-        return int(self._keys.size)
+        return len(self._acc)
 
     def voxels(self, min_hits: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centres, hit counts and mean intensities of voxels hit ``min_hits`` times or more.
@@ -151,13 +118,12 @@ class VoxelMap:
         intensity : numpy.ndarray
             float64 ``(M,)``: mean over those scans of the scan's mean intensity in the voxel.
         """
-        self._flush()
-        keep = self._hits >= min_hits
-        k = self._keys[keep]
-        ijk = np.stack([(k >> (2 * _BITS)) & _MASK, (k >> _BITS) & _MASK, k & _MASK], axis=1)
-        centres = (ijk - _OFFSET + 0.5) * self.voxel_size
-        hits = self._hits[keep]
-        return centres, hits, self._isum[keep] / hits
+        hits = self._acc.counts()
+        keep = hits >= min_hits
+        if not len(self._acc):
+            return np.zeros((0, 3)), hits, np.zeros(0)
+        centres = (self._acc.voxel_indices()[keep] + 0.5) * self.voxel_size
+        return centres, hits[keep], self._acc.points()[keep, 3].astype(np.float64)
 
 
 @dataclass
