@@ -3,11 +3,14 @@
 The driver plans (opens every run, picks its frames) and dispatches chunks of frames to an
 executor — a local process pool, this process, or a Dask cluster, one code path. Everything
 about a run's output folder — whether it may be written, its manifest, lock, valid and stale
-frames, timestamps files — it asks that folder's :class:`~.output_folder.ProcessedRun`: every
-folder is checked before anything is written (nothing inside a run; a manifest that agrees with
-the settings, or ``overwrite``), locked, prepared, and as a radar of a run finishes, its
-``timestamps.txt`` (and ``heatmap_cfg.txt``) are rewritten from the frames complete on disk. At
-the end, or when interrupted, ``process_report.json`` records what was done and what failed.
+frames, partial files, timestamps files — it asks of :mod:`.output_folder`, in three calls:
+:meth:`~.output_folder.JobOutputs.open` checks every folder before anything is written (nothing
+inside a run; a manifest that agrees with the settings, or ``overwrite``), locks and prepares
+each, and says which frames are complete and where new ones go; as a radar of a run finishes,
+:meth:`~.output_folder.ProcessedRun.finish_radar` rewrites its ``timestamps.txt`` (and
+``heatmap_cfg.txt``) from the frames complete on disk; at the end, or when interrupted,
+:meth:`~.output_folder.JobOutputs.close` writes ``process_report.json`` (what was done and what
+failed) and releases the locks.
 
 Resuming: frames whose product files are all complete are skipped; the rest are processed, so a
 killed job rerun with the same command finishes the work and gives the same bytes as an

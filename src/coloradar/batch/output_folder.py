@@ -10,14 +10,22 @@ reads it back::
     <out>/<radar>/pointclouds/{timestamps.txt, data/radar_pointcloud_<i>.bin}
 
 :class:`ProcessedRun` is the one object that knows this folder; the driver
-(:mod:`coloradar.batch.driver`) plans and dispatches work and asks it everything else.
+(:mod:`coloradar.batch.driver`) plans and dispatches work and asks it everything else, in three
+coarse calls: :meth:`JobOutputs.open` (check every folder of the job, then lock and prepare each:
+overwrite, partial files, stale frames, manifest; returns the frames already complete and where
+new ones go), :meth:`ProcessedRun.finish_radar` as each radar's frames are in (timestamps), and
+:meth:`JobOutputs.close` (the job's report, then the locks). Workers write frame files to the
+names it gives (:meth:`ProcessedRun.frame_file_parts`) through
+:func:`coloradar.formats.atomic.atomic_write_bytes`, the one atomic writer everything here uses.
 
 **Valid and complete frames.** A frame's product file is valid when it has the size its kind
 requires: a heatmap exactly ``el × az × range × 2`` float32 values of the processor's grid, a
 point cloud a whole number of 5-float32 rows (an empty cloud is a valid, empty file). A frame is
 complete when every requested product has a valid file. Files are only ever written atomically
 (:mod:`coloradar.formats.atomic`), so a file with a final name was written whole; the size check
-also catches files damaged afterwards.
+also catches files damaged afterwards. What an interrupted write left
+(:func:`~coloradar.formats.atomic.is_partial_file`) is removed from the folder before a job
+writes it.
 
 **Manifest.** ``process_manifest.json`` records, per radar and product, the processing settings
 and a fingerprint of the radar calibration the frames there were computed with
