@@ -45,7 +45,14 @@ from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, WorkerStartupError, make_executor
 from .manifest import calibration_fingerprint, input_versions, settings_record
-from .output_folder import PRODUCTS, FolderPlan, JobOutputs, OutputRequest, RadarProducts
+from .output_folder import (
+    PRODUCTS,
+    FolderPlan,
+    JobOutputs,
+    OutputRequest,
+    RadarProducts,
+    check_folders,
+)
 from .report import REPORT, BatchReport, RadarOutcome, RunOutcome
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "ProcessingJob", "RunTarget", "check_products", "process",
@@ -235,6 +242,9 @@ def _plan(targets: Sequence[RunTarget], opts: ProcessingJob,
             job = _plan_run(t, opts)
         except ColoradarError as exc:
             if opts.strict:
+                # An output folder that may not be written is said first, as if checked before
+                # any run was opened (JobOutputs.open checks them all, after the runs).
+                check_folders([(u.path, u.out) for u in targets])
                 raise
             name = t.path.name.removesuffix(".zip")
             report.runs[name] = RunOutcome(name, str(t.path), str(t.out), error=str(exc))

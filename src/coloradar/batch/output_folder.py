@@ -83,6 +83,7 @@ __all__ = [
     "OutputRequest",
     "ProcessedRun",
     "RadarProducts",
+    "check_folders",
     "frame_file",
     "is_valid_size",
     "output_paths",
@@ -515,6 +516,15 @@ class ProcessedRun:
         return set.intersection(*valid.values())
 
 
+def check_folders(targets: Sequence[tuple[Path, Path]]) -> list[ProcessedRun]:
+    """The output folders of ``(run, out)`` pairs, each checked by
+    :meth:`ProcessedRun.check_writable` (the first that may not be written raises)."""
+    folders = [ProcessedRun(out) for _run, out in targets]
+    for f, (run, _out) in zip(folders, targets, strict=True):
+        f.check_writable(run)
+    return folders
+
+
 @dataclass
 class OutputRequest:
     """What a processing job asks of one run's output folder.
@@ -593,9 +603,7 @@ class JobOutputs:
             Output made otherwise (other settings, no manifest) and no ``overwrite``, listing
             the first three such folders; or another job holding a lock.
         """
-        folders = [ProcessedRun(r.out) for r in requests]
-        for f, r in zip(folders, requests, strict=True):
-            f.check_writable(r.run)
+        folders = check_folders([(r.run, r.out) for r in requests])
         active = [(f, r) for f, r in zip(folders, requests, strict=True) if r.radars]
         conflicts = [c for f, r in active for c in f.conflicts(r.radars, prods, overwrite)]
         if conflicts:
