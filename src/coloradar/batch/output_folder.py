@@ -281,7 +281,7 @@ class ProcessedRun:
     def frame_file_parts(self, radar: str, product: str) -> tuple[str, str]:
         """``(head, tail)``: the file of frame number ``n`` of a product is ``head + str(n) +
         tail`` (:meth:`frame_file` as strings, for workers to name the files they write)."""
-        st = COLORADAR.frame(f"{radar}/{product}")
+        st = COLORADAR.frame(f"{radar}/{product}")  # frame files: <data>/<prefix>_<n>.bin
         return str(self.root / st.data / f"{st.prefix}_"), ".bin"
 
     @property
