@@ -4,7 +4,9 @@
   whole dataset, in chunks of frames, resumable, with a JSON report; it plans and dispatches
   the work (what to do travels as one :class:`~.driver.ProcessingJob`).
 * :mod:`.output_folder` — :class:`~.output_folder.ProcessedRun`, the one owner of a processed
-  run's output folder: paths, manifest, valid and stale frames, lock, partial files.
+  run's output folder: paths, manifest, valid and stale frames, lock, partial files; and
+  :class:`~.output_folder.JobOutputs`, a job's folders opened (checked, locked, prepared) and
+  closed (report, unlock) together.
 * :mod:`.run_processing` — :func:`~.run_processing.process_run` (one run) and
   :func:`~.run_processing.process_frames` (the plain unit of work).
 * :mod:`.executors` — one interface over a serial loop, a local process pool and Dask.

@@ -2,8 +2,10 @@
 
 :func:`process_chunk` runs in a worker (a pool process, a Dask worker thread, or this
 process): it opens the run itself, processes its frames one at a time (memory: one frame and
-its products), writes each product file atomically, and returns only a small
-:class:`ChunkResult`. A frame that fails is recorded and the chunk goes on.
+its products), writes each product file atomically (through
+:func:`coloradar.formats.atomic.atomic_write_bytes`, to the file the output folder named:
+:attr:`FrameChunk.files`), and returns only a small :class:`ChunkResult`. A frame that fails is
+recorded and the chunk goes on.
 """
 
 from __future__ import annotations
@@ -20,8 +22,8 @@ from ..calib import Calibration
 from ..dataset import FrameStream, open_sequence
 from ..dsp import ProcessingSettings, RadarProcessor
 from ..errors import ColoradarError
-from ..formats import write_heatmap, write_radar_pointcloud
-from .output_folder import ProcessedRun
+from ..formats.atomic import atomic_write_bytes
+from ..formats.binary import encode_heatmap, encode_pointcloud
 
 try:
     import resource
@@ -53,6 +55,10 @@ class FrameChunk:
         Positions in the run's ADC stream and the file numbers the driver saw there.
     out
         This run's output folder.
+    files
+        ``(head, tail)`` per product (in the order of ``products``): frame number ``n`` goes to
+        ``head + str(n) + tail``
+        (:meth:`~coloradar.batch.output_folder.ProcessedRun.frame_file_parts`).
     settings
         Processing settings.
     """
@@ -65,6 +71,7 @@ class FrameChunk:
     positions: tuple[int, ...]
     frame_ids: tuple[int, ...]
     out: str
+    files: tuple[tuple[str, str], ...]
     settings: ProcessingSettings | None = None
 
 
@@ -135,12 +142,16 @@ def _process_frame(stream: FrameStream, proc: RadarProcessor, chunk: FrameChunk,
     if int(stream.frame_ids[k]) != fid:
         raise ColoradarError(f"{stream.path(k)}: the run changed while it was being processed "
                              f"(expected frame {fid} at position {k})")
-    prods, folder = chunk.products, ProcessedRun(chunk.out)
+    prods = chunk.products
     hm, pts = proc.products(stream[k], "heatmaps" in prods, "pointclouds" in prods)
-    if hm is not None:
-        write_heatmap(folder.frame_file(chunk.radar, "heatmaps", fid), hm)
-    if pts is not None:
-        write_radar_pointcloud(folder.frame_file(chunk.radar, "pointclouds", fid), pts)
+    for product, (head, tail) in zip(prods, chunk.files, strict=True):
+        if product == "heatmaps" and hm is not None:
+            data = encode_heatmap(hm)
+        elif product == "pointclouds" and pts is not None:
+            data = encode_pointcloud(pts, 5)
+        else:
+            continue
+        atomic_write_bytes(f"{head}{fid}{tail}", data)
 
 
 def process_chunk(chunk: FrameChunk) -> ChunkResult:

@@ -3,11 +3,14 @@
 The driver plans (opens every run, picks its frames) and dispatches chunks of frames to an
 executor — a local process pool, this process, or a Dask cluster, one code path. Everything
 about a run's output folder — whether it may be written, its manifest, lock, valid and stale
-frames, timestamps files — it asks that folder's :class:`~.output_folder.ProcessedRun`: every
-folder is checked before anything is written (nothing inside a run; a manifest that agrees with
-the settings, or ``overwrite``), locked, prepared, and as a radar of a run finishes, its
-``timestamps.txt`` (and ``heatmap_cfg.txt``) are rewritten from the frames complete on disk. At
-the end, or when interrupted, ``process_report.json`` records what was done and what failed.
+frames, partial files, timestamps files — it asks of :mod:`.output_folder`, in three calls:
+:meth:`~.output_folder.JobOutputs.open` checks every folder before anything is written (nothing
+inside a run; a manifest that agrees with the settings, or ``overwrite``), locks and prepares
+each, and says which frames are complete and where new ones go; as a radar of a run finishes,
+:meth:`~.output_folder.ProcessedRun.finish_radar` rewrites its ``timestamps.txt`` (and
+``heatmap_cfg.txt``) from the frames complete on disk; at the end, or when interrupted,
+:meth:`~.output_folder.JobOutputs.close` writes ``process_report.json`` (what was done and what
+failed) and releases the locks.
 
 Resuming: frames whose product files are all complete are skipped; the rest are processed, so a
 killed job rerun with the same command finishes the work and gives the same bytes as an
@@ -26,7 +29,6 @@ import math
 import os
 import time
 from collections.abc import Iterator, Sequence
-from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,14 +39,20 @@ from ..calib import RADARS, Calibration, format_heatmap_cfg
 from ..dataset import FrameStream, find_runs, open_sequence
 from ..dataset.dataset import is_run_folder
 from ..dsp import ProcessingSettings, RadarProcessor
-from ..errors import ColoradarError, MissingDataError, OutputExistsError
+from ..errors import ColoradarError, MissingDataError
 from ..formats import heatmap_nbytes
-from ..formats.atomic import clean_partial_files, make_output_dir
 from ..progress import Progress
 from .chunks import FrameChunk, FrameFailure, process_chunk
 from .executors import Executor, TaskError, WorkerStartupError, make_executor
 from .manifest import calibration_fingerprint, input_versions, settings_record
-from .output_folder import PRODUCTS, ProcessedRun, RadarProducts
+from .output_folder import (
+    PRODUCTS,
+    FolderPlan,
+    JobOutputs,
+    OutputRequest,
+    RadarProducts,
+    check_folders,
+)
 from .report import REPORT, BatchReport, RadarOutcome, RunOutcome
 
 __all__ = ["DEFAULT_CHUNK_SIZE", "ProcessingJob", "RunTarget", "check_products", "process",
@@ -135,10 +143,15 @@ class _RadarJob:
 @dataclass
 class _RunJob:
     target: RunTarget
-    folder: ProcessedRun
     name: str
     outcome: RunOutcome
     radars: list[_RadarJob] = field(default_factory=list)
+    plan: FolderPlan | None = None  # its output folder, once opened
+
+    @property
+    def output(self) -> FolderPlan:
+        assert self.plan is not None, "the output folder is opened before any work"
+        return self.plan
 
 
 def check_products(products: Sequence[str]) -> tuple[str, ...]:
@@ -186,7 +199,7 @@ def _chosen_radars(seq, radars: str | Sequence[str], strict: bool,
 
 def _plan_run(t: RunTarget, opts: ProcessingJob) -> _RunJob:
     seq = open_sequence(t.path, calib=opts.calib)
-    job = _RunJob(t, ProcessedRun(t.out), seq.name, RunOutcome(seq.name, str(t.path), str(t.out)))
+    job = _RunJob(t, seq.name, RunOutcome(seq.name, str(t.path), str(t.out)))
     rec = settings_record(opts.settings)
     for radar in _chosen_radars(seq, opts.radars, opts.strict, job.outcome):
         rc = seq.calib.radar(radar)
@@ -218,34 +231,30 @@ def _plan_run(t: RunTarget, opts: ProcessingJob) -> _RunJob:
 
 
 def _plan(targets: Sequence[RunTarget], opts: ProcessingJob,
-          report: BatchReport) -> list[_RunJob]:
+          report: BatchReport) -> tuple[list[_RunJob], list[OutputRequest]]:
     """Open every run and pick its radars and frames; a run that cannot be opened is recorded
-    in ``report`` (or raised with ``strict``)."""
+    in ``report`` (or raised with ``strict``). Returns the runs opened and what every target
+    asks of its output folder (nothing to write for a run that could not be opened)."""
     planned: list[_RunJob] = []
+    requests: list[OutputRequest] = []
     for t in targets:
         try:
             job = _plan_run(t, opts)
         except ColoradarError as exc:
             if opts.strict:
+                # An output folder that may not be written is said first, as if checked before
+                # any run was opened (JobOutputs.open checks them all, after the runs).
+                check_folders([(u.path, u.out) for u in targets])
                 raise
             name = t.path.name.removesuffix(".zip")
             report.runs[name] = RunOutcome(name, str(t.path), str(t.out), error=str(exc))
+            requests.append(OutputRequest(t.path, t.out, name))
             continue
         report.runs[job.name] = job.outcome
         planned.append(job)
-    return planned
-
-
-def _refuse_conflicts(planned: list[_RunJob], prods: tuple[str, ...], overwrite: bool) -> None:
-    conflicts = [c for job in planned
-                 for c in job.folder.conflicts([rj.products for rj in job.radars], prods,
-                                               overwrite)]
-    if conflicts:
-        more = f"; and {len(conflicts) - 3} more" if len(conflicts) > 3 else ""
-        raise OutputExistsError("output exists: " + "; ".join(conflicts[:3]) + more
-                                + "; rerun with the "
-                                "same settings to resume it, or pass overwrite=True "
-                                "(--overwrite) to redo it")
+        requests.append(OutputRequest(t.path, t.out, job.name,
+                                      [rj.products for rj in job.radars]))
+    return planned, requests
 
 
 def _set_todo(job: _RunJob, complete: dict[str, set[int]], chunk_size: int) -> None:
@@ -260,7 +269,8 @@ def _set_todo(job: _RunJob, complete: dict[str, set[int]], chunk_size: int) -> N
 def _finish_radar(job: _RunJob, rj: _RadarJob, prods: tuple[str, ...]) -> None:
     """A radar's chunks are all back: write its timestamps, settle lost chunks from the disk."""
     ids = np.asarray(rj.stream.frame_ids)
-    complete = job.folder.finish_radar(rj.products, prods, ids, np.asarray(rj.stream.timestamps))
+    complete = job.output.folder.finish_radar(rj.products, prods, ids,
+                                              np.asarray(rj.stream.timestamps))
     for k, err in rj.unsure:
         if int(ids[k]) in complete:  # written before its worker died
             rj.outcome.done += 1
@@ -276,13 +286,13 @@ def _tasks(jobs: list[_RunJob], opts: ProcessingJob,
     calib = opts.calib
     cal = calib if isinstance(calib, Calibration) or calib is None else str(Path(calib).resolve())
     for job in jobs:
-        run, out = str(job.target.path.resolve()), job.folder.location
+        run, out = str(job.target.path.resolve()), job.output.location
         for rj in job.radars:
-            ids = rj.stream.frame_ids
+            ids, files = rj.stream.frame_ids, job.output.frame_files[rj.radar]
             for s in range(0, len(rj.todo), opts.chunk_size):
                 pos = tuple(rj.todo[s: s + opts.chunk_size])
                 yield FrameChunk(run, cal, rj.products.calibration_sha256, rj.radar, prods, pos,
-                                 tuple(int(ids[k]) for k in pos), out, opts.settings)
+                                 tuple(int(ids[k]) for k in pos), out, files, opts.settings)
 
 
 def _frames_text(frames: slice | None) -> str | None:
@@ -297,7 +307,7 @@ def _run_chunks(active: list[_RunJob], opts: ProcessingJob, prods: tuple[str, ..
                 report: BatchReport, bar: Progress) -> None:
     """Finish the radars with nothing to do, hand the others' chunks to the executor, record
     what comes back, and finish each radar as its last chunk returns."""
-    chunks = {(job.folder.location, rj.radar): (job, rj)
+    chunks = {(job.output.location, rj.radar): (job, rj)
               for job in active for rj in job.radars}
     for job in active:
         for rj in job.radars:
@@ -333,14 +343,6 @@ def _run_chunks(active: list[_RunJob], opts: ProcessingJob, prods: tuple[str, ..
             ex.close()
 
 
-def _write_report(report: BatchReport, report_path: str | os.PathLike | None) -> None:
-    if report_path is not None:
-        rp = Path(report_path)
-        make_output_dir(rp.parent)
-        clean_partial_files([rp.parent], rp.name)
-        report.write(report_path)
-
-
 def process_targets(targets: Sequence[RunTarget], report_path: str | os.PathLike | None,
                     job: ProcessingJob | None = None, **options: Any) -> BatchReport:
     """Process runs, each into its own output folder, through one executor.
@@ -373,32 +375,31 @@ def process_targets(targets: Sequence[RunTarget], report_path: str | os.PathLike
         "frames": _frames_text(opts.frames), "chunk_size": opts.chunk_size,
         "overwrite": opts.overwrite, "settings": settings_record(opts.settings)})
     _check_radars(radars)
-    for t in targets:
-        ProcessedRun(t.out).check_writable(t.path)
-    planned = _plan(targets, opts, report)
-    _refuse_conflicts(planned, prods, opts.overwrite)
+    planned, requests = _plan(targets, opts, report)
+    # The folders are asked everything at once: checked (all before any is written), locked,
+    # prepared; what comes back is which frames are complete and where new ones go.
+    outputs = JobOutputs.open(requests, prods, opts.overwrite)
     active = [job for job in planned if job.radars]
-    with ExitStack() as stack:
-        for rjob in active:
-            stack.enter_context(rjob.folder.lock())
-        for rjob in active:
-            complete = rjob.folder.prepare(rjob.name, [rj.products for rj in rjob.radars], prods,
-                                           opts.overwrite)
-            _set_todo(rjob, complete, opts.chunk_size)
+    bar = None
+    try:
+        for rjob, plan in zip(active, outputs.plans, strict=True):
+            rjob.plan = plan
+            _set_todo(rjob, plan.complete, opts.chunk_size)
         total = sum(len(rj.todo) for rjob in active for rj in rjob.radars)
         bar = Progress(total, desc=opts.desc, enabled=opts.progress and total > 0)
-        try:
-            _run_chunks(active, opts, prods, report, bar)
-        except WorkerStartupError as exc:
-            report.error = str(exc)
-            raise
-        except BaseException:
-            report.interrupted = True
-            raise
-        finally:
+        _run_chunks(active, opts, prods, report, bar)
+    except WorkerStartupError as exc:
+        report.error = str(exc)
+        raise
+    except BaseException:
+        report.interrupted = True
+        raise
+    finally:
+        if bar is not None:
             bar.close()
-            report.finish(time.perf_counter() - t0)
-            _write_report(report, report_path)
+        report.finish(time.perf_counter() - t0)
+        # The report first, then the locks: a job's folder is not released half-reported.
+        report.path = outputs.close(report_path, report.to_text())
     return report
 
 

@@ -10,14 +10,22 @@ reads it back::
     <out>/<radar>/pointclouds/{timestamps.txt, data/radar_pointcloud_<i>.bin}
 
 :class:`ProcessedRun` is the one object that knows this folder; the driver
-(:mod:`coloradar.batch.driver`) plans and dispatches work and asks it everything else.
+(:mod:`coloradar.batch.driver`) plans and dispatches work and asks it everything else, in three
+coarse calls: :meth:`JobOutputs.open` (check every folder of the job, then lock and prepare each:
+overwrite, partial files, stale frames, manifest; returns the frames already complete and where
+new ones go), :meth:`ProcessedRun.finish_radar` as each radar's frames are in (timestamps), and
+:meth:`JobOutputs.close` (the job's report, then the locks). Workers write frame files to the
+names it gives (:meth:`ProcessedRun.frame_file_parts`) through
+:func:`coloradar.formats.atomic.atomic_write_bytes`, the one atomic writer everything here uses.
 
 **Valid and complete frames.** A frame's product file is valid when it has the size its kind
 requires: a heatmap exactly ``el × az × range × 2`` float32 values of the processor's grid, a
 point cloud a whole number of 5-float32 rows (an empty cloud is a valid, empty file). A frame is
 complete when every requested product has a valid file. Files are only ever written atomically
 (:mod:`coloradar.formats.atomic`), so a file with a final name was written whole; the size check
-also catches files damaged afterwards.
+also catches files damaged afterwards. What an interrupted write left
+(:func:`~coloradar.formats.atomic.is_partial_file`) is removed from the folder before a job
+writes it.
 
 **Manifest.** ``process_manifest.json`` records, per radar and product, the processing settings
 and a fingerprint of the radar calibration the frames there were computed with
@@ -39,6 +47,7 @@ import os
 import re
 import warnings
 from collections.abc import Iterable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,7 +62,7 @@ from ..errors import (
     OutputExistsError,
     WriteError,
 )
-from ..formats.atomic import clean_partial_files, make_output_dir, write_text_if_changed
+from ..formats.atomic import is_partial_file, output_dir_error, write_text_if_changed
 from ..formats.layout import COLORADAR, LAYOUTS, PROCESS_PRODUCTS
 from ..formats.source import read_file_text
 from ..formats.text import format_timestamps
@@ -68,9 +77,13 @@ __all__ = [
     "LOCK",
     "MANIFEST",
     "PRODUCTS",
+    "FolderPlan",
+    "JobOutputs",
     "OutputLock",
+    "OutputRequest",
     "ProcessedRun",
     "RadarProducts",
+    "check_folders",
     "frame_file",
     "is_valid_size",
     "output_paths",
@@ -91,6 +104,31 @@ _RUN_PARTS = tuple(dict.fromkeys(
     m for lay in LAYOUTS.values() for m in lay.run_markers
     if not any(m == s.folder for s in lay.frames.values()
                if s.sensor in lay.radars and s.product in PRODUCTS)))
+
+
+def _make_dir(path: Path) -> None:
+    """Create a folder of the output (and its parents) if needed; a WriteError when it cannot."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_dir_error(path, exc) from None
+
+
+def _remove_partials(folders: Iterable[Path], name: str | None = None) -> None:
+    """Delete what interrupted atomic writes left directly inside ``folders`` (only those of
+    file ``name`` when given): never a valid file, and never to be mistaken for one."""
+    for folder in folders:
+        try:
+            entries = list(os.scandir(folder))
+        except FileNotFoundError:
+            continue
+        for e in entries:
+            if (is_partial_file(e.name) and e.is_file()
+                    and (name is None or e.name.startswith(f".{name}."))):
+                try:
+                    os.unlink(e.path)
+                except FileNotFoundError:
+                    pass
 
 
 def is_valid_size(product: str, size: int, heatmap_bytes: int) -> bool:
@@ -178,7 +216,7 @@ class OutputLock:
     def __enter__(self) -> OutputLock:
         if fcntl is None:  # pragma: no cover
             return self
-        make_output_dir(self.path.parent)
+        _make_dir(self.path.parent)
         while True:
             try:
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -239,6 +277,12 @@ class ProcessedRun:
     def frame_file(self, radar: str, product: str, frame_id: int) -> Path:
         """The file of frame number ``frame_id`` of a product (named like the dataset's own)."""
         return self.root / COLORADAR.frame(f"{radar}/{product}").frame_path(frame_id)
+
+    def frame_file_parts(self, radar: str, product: str) -> tuple[str, str]:
+        """``(head, tail)``: the file of frame number ``n`` of a product is ``head + str(n) +
+        tail`` (:meth:`frame_file` as strings, for workers to name the files they write)."""
+        st = COLORADAR.frame(f"{radar}/{product}")  # frame files: <data>/<prefix>_<n>.bin
+        return str(self.root / st.data / f"{st.prefix}_"), ".bin"
 
     @property
     def location(self) -> str:
@@ -391,7 +435,7 @@ class ProcessedRun:
                 overwrite: bool) -> dict[str, set[int]]:
         """Under the lock: clear what ``overwrite`` replaces, remove partial files and stale
         frames, record the settings and inputs; returns each radar's complete frame numbers."""
-        make_output_dir(self.root)
+        _make_dir(self.root)
         try:
             manifest = self.read_manifest()
         except OutputExistsError:
@@ -412,18 +456,19 @@ class ProcessedRun:
                             f"{folder}: holds {p} that process_manifest.json does not record as "
                             "made by coloradar; not deleting them, even with --overwrite: choose "
                             "another output folder")
-                make_output_dir(data)
+                _make_dir(data)
                 folders += [folder, data]
                 entries[f"{rp.radar}/{p}"] = {"settings": rp.settings,
                                               "calibration_sha256": rp.calibration_sha256}
-        clean_partial_files(folders)
+        _remove_partials(folders)
         inputs = dict((manifest or {}).get("inputs") or {})  # radars not processed now stay
         for rp in radars:
             if not overwrite:
                 self._remove_stale(manifest, rp)
             inputs[rp.radar] = rp.inputs
+        complete = {rp.radar: self.complete_frames(rp, prods) for rp in radars}
         self.write_manifest(run, entries, inputs)
-        return {rp.radar: self.complete_frames(rp, prods) for rp in radars}
+        return complete
 
     def _remove_stale(self, manifest: dict | None, rp: RadarProducts) -> None:
         """Delete the product files of frames whose input was rewritten since they were made (a
@@ -441,7 +486,7 @@ class ProcessedRun:
                 self.frame_file(rp.radar, p, i).unlink(missing_ok=True)
         warnings.warn(f"{self.root / rp.radar}: the ADC files of {len(stale)} frame(s) changed "
                       f"since their output was made (first: frame {stale[0]}); processing them "
-                      "again", DataWarning, stacklevel=4)
+                      "again", DataWarning, stacklevel=5)
 
     # -- after writing -------------------------------------------------------------------------
     def complete_frames(self, rp: RadarProducts, prods: Sequence[str]) -> set[int]:
@@ -469,3 +514,131 @@ class ProcessedRun:
             write_text_if_changed(folder / "timestamps.txt",
                                   timestamps_text(frame_ids, timestamps, written))
         return set.intersection(*valid.values())
+
+
+def check_folders(targets: Sequence[tuple[Path, Path]]) -> list[ProcessedRun]:
+    """The output folders of ``(run, out)`` pairs, each checked by
+    :meth:`ProcessedRun.check_writable` (the first that may not be written raises)."""
+    folders = [ProcessedRun(out) for _run, out in targets]
+    for f, (run, _out) in zip(folders, targets, strict=True):
+        f.check_writable(run)
+    return folders
+
+
+@dataclass
+class OutputRequest:
+    """What a processing job asks of one run's output folder.
+
+    Attributes
+    ----------
+    run
+        The run (the folder may not lie inside it).
+    out
+        The output folder.
+    name
+        The run's name (recorded in the manifest).
+    radars
+        What each radar's products are to be made with; empty when the run has nothing to
+        write (it could not be opened, or has none of the radars asked for): its folder is
+        still checked, but neither locked nor written.
+    """
+
+    run: Path
+    out: Path
+    name: str
+    radars: list[RadarProducts] = field(default_factory=list)
+
+
+@dataclass
+class FolderPlan:
+    """An output folder opened for a job: checked, locked and prepared.
+
+    Attributes
+    ----------
+    folder
+        The folder.
+    location
+        The folder as an absolute path string (:attr:`ProcessedRun.location`).
+    complete
+        Radar -> frame numbers already complete (every product valid on disk): not to redo.
+    frame_files
+        Radar -> ``(head, tail)`` of each product asked for, in order
+        (:meth:`ProcessedRun.frame_file_parts`).
+    """
+
+    folder: ProcessedRun
+    location: str
+    complete: dict[str, set[int]]
+    frame_files: dict[str, tuple[tuple[str, str], ...]]
+
+
+class JobOutputs:
+    """The output folders of one processing job, opened together and closed together.
+
+    :meth:`open` checks every folder before it writes any (nothing inside a run; a manifest that
+    agrees with the settings, or ``overwrite``), then locks and prepares each; :meth:`close`
+    writes the job's report and releases the locks. In between, the driver finishes each radar
+    as its frames are in (:meth:`ProcessedRun.finish_radar`).
+
+    Attributes
+    ----------
+    plans
+        One :class:`FolderPlan` per request that has radars to write, in request order.
+    """
+
+    def __init__(self) -> None:
+        self.plans: list[FolderPlan] = []
+        self._locks = ExitStack()
+
+    @classmethod
+    def open(cls, requests: Sequence[OutputRequest], prods: tuple[str, ...],
+             overwrite: bool) -> JobOutputs:
+        """Check, lock and prepare the folders of ``requests``.
+
+        Raises
+        ------
+        coloradar.errors.ColoradarError, WriteError
+            A folder that may not be written (a file, inside a run, a run itself).
+        OutputExistsError
+            Output made otherwise (other settings, no manifest) and no ``overwrite``, listing
+            the first three such folders; or another job holding a lock.
+        """
+        folders = check_folders([(r.run, r.out) for r in requests])
+        active = [(f, r) for f, r in zip(folders, requests, strict=True) if r.radars]
+        conflicts = [c for f, r in active for c in f.conflicts(r.radars, prods, overwrite)]
+        if conflicts:
+            more = f"; and {len(conflicts) - 3} more" if len(conflicts) > 3 else ""
+            raise OutputExistsError("output exists: " + "; ".join(conflicts[:3]) + more
+                                    + "; rerun with the same settings to resume it, or pass "
+                                    "overwrite=True (--overwrite) to redo it")
+        job = cls()
+        with job._locks:
+            for f, _r in active:
+                job._locks.enter_context(f.lock())
+            for f, r in active:
+                complete = f.prepare(r.name, r.radars, prods, overwrite)
+                files = {rp.radar: tuple(f.frame_file_parts(rp.radar, p) for p in prods)
+                         for rp in r.radars}
+                job.plans.append(FolderPlan(f, f.location, complete, files))
+            job._locks = job._locks.pop_all()  # opened: held until close()
+        return job
+
+    def close(self, report_path: str | os.PathLike | None = None,
+              report: str | None = None) -> Path | None:
+        """Write the job's report text to ``report_path`` (when given), then release the locks.
+
+        Returns
+        -------
+        pathlib.Path or None
+            Where the report was written.
+        """
+        try:
+            if report_path is None or report is None:
+                return None
+            path = Path(report_path)
+            _make_dir(path.parent)
+            _remove_partials([path.parent], path.name)
+            write_text_if_changed(path, report)
+            return path
+        finally:
+            self._locks.close()

@@ -151,10 +151,14 @@ class BatchReport:
                 "workers": dict(sorted(self.workers.items())),
                 "runs": {n: r.to_json() for n, r in sorted(self.runs.items())}}
 
+    def to_text(self) -> str:
+        """The JSON report as saved (``process_report.json``)."""
+        return json.dumps(self.to_json(), indent=1) + "\n"
+
     def write(self, path: str | os.PathLike) -> Path:
         """Write the JSON report atomically; returns its path."""
         self.path = Path(path)
-        atomic_write_text(self.path, json.dumps(self.to_json(), indent=1) + "\n")
+        atomic_write_text(self.path, self.to_text())
         return self.path
 
     def summary(self, max_failures: int = 10) -> str:

@@ -11,7 +11,8 @@ from pathlib import Path
 from ..errors import ColoradarError, OutputExistsError, WriteError
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "clean_partial_files", "default_file_mode",
-           "make_output_dir", "new_output_path", "write_text_if_changed"]
+           "is_partial_file", "make_output_dir", "new_output_path", "output_dir_error",
+           "write_text_if_changed"]
 
 # atomic_write_bytes's temporary names: ".<final name>.<random>.tmp"
 _PARTIAL_RE = re.compile(r"^\..+\.tmp$")
@@ -76,16 +77,23 @@ def make_output_dir(path: str | os.PathLike[str]) -> Path:
     Raises
     ------
     WriteError
-        When ``path`` (or a parent) is a file, or it cannot be created.
+        When ``path`` (or a parent) is a file, or it cannot be created
+        (:func:`output_dir_error`).
     """
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise WriteError(f"{path}: expected an output folder, found a file")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise _write_error(path, exc) from None
+        raise output_dir_error(path, exc) from None
     return path
+
+
+def output_dir_error(path: Path, exc: OSError) -> WriteError:
+    """The :class:`~coloradar.WriteError` for an output folder ``path`` that ``mkdir`` could not
+    create: a file in its place, or why the system refused."""
+    if path.exists() and not path.is_dir():
+        return WriteError(f"{path}: expected an output folder, found a file")
+    return _write_error(path, exc)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
@@ -114,10 +122,15 @@ def new_output_path(path: str | os.PathLike[str], overwrite: bool = False) -> Pa
     return path
 
 
+def is_partial_file(name: str) -> bool:
+    """Whether a file name is that of an interrupted atomic write (``.<name>.<random>.tmp``, see
+    :func:`atomic_write_bytes`); readers ignore such files and writers may delete them."""
+    return _PARTIAL_RE.match(name) is not None
+
+
 def clean_partial_files(folders: Iterable[Path], name: str | None = None) -> int:
-    """Delete temporary files of interrupted atomic writes (``.<name>.<random>.tmp``, see
-    :func:`atomic_write_bytes`) directly inside ``folders`` (only those of file ``name`` when
-    given); returns how many."""
+    """Delete temporary files of interrupted atomic writes (:func:`is_partial_file`) directly
+    inside ``folders`` (only those of file ``name`` when given); returns how many."""
     n = 0
     for folder in folders:
         try:
@@ -125,7 +138,7 @@ def clean_partial_files(folders: Iterable[Path], name: str | None = None) -> int
         except FileNotFoundError:
             continue
         for e in entries:
-            if (_PARTIAL_RE.match(e.name) and e.is_file()
+            if (is_partial_file(e.name) and e.is_file()
                     and (name is None or e.name.startswith(f".{name}."))):
                 try:
                     os.unlink(e.path)
