@@ -10,11 +10,13 @@
    start only from a frame the next one corroborates within what the IMU allows
    (:func:`_consistent`).
 3. **Propagation** with every IMU sample (:meth:`.ErrorStateEKF.propagate`).
-4. **Updates**, in time order over all radars: a static frame gives a zero-velocity update
+4. **Updates**, in time order over all radars (the order of the frames' IMU times
+   ``stamp + t_d[r]`` under the current offsets): a static frame gives a zero-velocity update
    (``v = 0``, σ ``zupt_std``) and a zero-rate update of the gyro bias (the mean rate of the IMU
    samples since the previous one); any other usable frame gives a radar velocity update,
-   ``z = v_radar`` (RANSAC ego-velocity, :mod:`.ego_velocity`), covariance the RANSAC one plus
-   ``velocity_noise_floor²`` (the RANSAC covariance leaves out angle and Doppler-bin errors),
+   ``z = v_radar`` (RANSAC ego-velocity, :mod:`.ego_velocity`), covariance the RANSAC one
+   times ``velocity_noise_scale²`` plus ``velocity_noise_floor²`` (the RANSAC covariance has
+   the right shape but leaves out angle and Doppler-bin errors),
    ``h(x) = R_irᵀ (Rᵀ v + ω × t_ir)`` at IMU time ``t + t_d``. Each update is gated by the
    chi-square test of its normalised innovation at ``gate_probability``. A planar ego-velocity
    (``v_z`` fixed at 0) updates ``v_z`` only loosely (``planar_vz_std``).
@@ -65,8 +67,14 @@ class RioConfig:
         [m/s²/√s], [rad/s/√s].
     accel_bias_std, gyro_bias_std
         Initial bias uncertainty [m/s²], [rad/s] (turn-on bias).
-    velocity_noise_floor
-        Added in quadrature to each axis of the RANSAC ego-velocity covariance [m/s].
+    velocity_noise_scale, velocity_noise_floor
+        The radar measurement covariance is ``scale² C + floor² I`` with ``C`` the RANSAC
+        ego-velocity covariance [-, m/s]. The defaults (2, 5 mm/s) are measured: over nine
+        simulated 60 s runs the scale that makes the normalised error of the ego-velocities
+        against the truth equal its degrees of freedom was 1.8 (cascade) and 1.4 (single
+        chip). An isotropic floor large enough to cover the across-boresight errors (the
+        0.05 m/s used before) swamps the boresight axis, whose error is a few mm/s and which
+        carries the forward acceleration and so the time offset.
     gate_probability
         Chi-square gate of every update (an innovation beyond this quantile is rejected).
     estimate_time_offset
@@ -74,8 +82,10 @@ class RioConfig:
     time_offset, time_offset_std
         Its initial value and uncertainty [s].
     time_offset_warmup
-        Seconds after the start before the time offset is estimated (until then it is held
-        at ``time_offset``): errors of the initial state are not to be read as an offset.
+        Seconds after the start during which the time offset is held at ``time_offset``
+        (default 0: estimated from the first frame). Holding it while the rig starts moving
+        (the strongest accelerations, the most informative frames) applies those frames at
+        the wrong time, and their error goes into the biases and rotations.
     estimate_extrinsic_rotation
         Estimate each radar's rotation relative to the IMU online (the calibration's as prior).
     extrinsic_rotation_std
