@@ -181,7 +181,7 @@ def _rio_accuracy(runs: list[str]) -> None:
           "(SE(3)-aligned RMSE), % of the distance")
     print(f"{'run':<16} {'dist':>6} {'vmax':>5} " + " ".join(
         f"{n:>13}" for n in ("EKF cascade", "EKF single", "EKF both (def)", "DR cascade",
-                             "DR single")) + f" {'t_d est/true':>13}")
+                             "DR single")) + f" {'t_d est/true':>13} (cascade; single chip)")
     rows = []
     for run in runs:
         with warnings.catch_warnings():
@@ -201,7 +201,7 @@ def _rio_accuracy(runs: list[str]) -> None:
                 end = np.linalg.norm(traj.translations[-1] - g[-1])
                 return d, 100 * end / d, absolute_trajectory_error(traj, gt).rmse_percent
 
-            cells, td, td_std = [], 0.0, 0.0
+            cells, td, td_std, td_sc, td_sc_std = [], 0.0, 0.0, 0.0, 0.0
             for radars in (["cascade"], ["single_chip"], ["cascade", "single_chip"]):
                 res = rio_odometry([tr[r][0] for r in radars], seq.calib, imu.timestamps,
                                    imu.data, groundtruth=gt, config=cfg,
@@ -210,6 +210,8 @@ def _rio_accuracy(runs: list[str]) -> None:
                 if len(radars) == 2:                  # the default: the cascade's offset
                     td = float(res.time_offset[-1, 0])
                     td_std = float(res.time_offset_std[-1, 0])
+                    td_sc = float(res.time_offset[-1, 1])     # and the single chip's
+                    td_sc_std = float(res.time_offset_std[-1, 1])
             for r in ("cascade", "single_chip"):
                 dr = radar_inertial_odometry(tr[r][0], seq.calib, imu_timestamps=imu.timestamps,
                                              imu_rates=imu.angular_rates, groundtruth=gt)
@@ -219,7 +221,8 @@ def _rio_accuracy(runs: list[str]) -> None:
         name = Path(run).name
         print(f"{name:<16} {cells[0][0]:>6.1f} {vmax:>5.2f} " + " ".join(
             f"{c[1]:>6.2f}/{c[2]:<6.2f}" for c in cells)
-            + f" {1e3 * td:>6.1f}/{1e3 * td_true:<5.1f}ms (σ {1e3 * td_std:.1f})", flush=True)
+            + f" {1e3 * td:>6.1f}/{1e3 * td_true:<5.1f}ms (σ {1e3 * td_std:.1f})"
+            + f" single {1e3 * td_sc:.1f} (σ {1e3 * td_sc_std:.1f})", flush=True)
         rows.append([c[1:] for c in cells])
     if len(rows) > 1:
         a = np.array(rows)                           # runs x methods x (end, ate)
