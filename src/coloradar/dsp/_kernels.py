@@ -15,6 +15,7 @@ silent pause.
 
 from __future__ import annotations
 
+import math
 import sys
 import warnings
 from collections.abc import Callable
@@ -23,8 +24,9 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["CACHE_PROBLEM", "LANES", "gather_rows", "peak_over_doppler",
-           "peak_over_doppler_planar", "prepare_chirps"]
+__all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
+           "newton_refine", "peak_over_doppler", "peak_over_doppler_planar", "prepare_chirps",
+           "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -512,8 +514,191 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
                     out[k, c, 2 * n] = vr * gr - vi * gi
                     out[k, c, 2 * n + 1] = vr * gi + vi * gr
 
+
+# ------------------------------------------------------------------ per-detection kernels
+# Beams of single detections at arbitrary direction sines (coloradar.dsp.processor's
+# detection stages). Element m sits at integer grid positions (az_pos[m], el_pos[m]), so its
+# steering factor exp(j(ca·az_pos·u_y + cb·el_pos·u_z)) is a product of two powers of one
+# phasor per axis: a few complex multiplications per position instead of a sine and a cosine
+# per element (float64 throughout; the numpy path rounds the phases to float32, ~3e-5 rad).
+
+
+@numba.njit(inline="always")
+def _powers(c: float, u: float, out: Any) -> None:  # pragma: no cover - compiled
+    # out[k] = exp(j·c·u·k), k = 0 … len − 1, by repeated multiplication (error ~k·1e-16)
+    e = complex(math.cos(c * u), math.sin(c * u))
+    v = 1.0 + 0.0j
+    for k in range(out.size):
+        out[k] = v
+        v *= e
+
+
+@_jit(nogil=True)
+def steer_columns(ca: float, cb: float, az_pos: Any, el_pos: Any, uy: Any, uz: Any,
+                  out: Any) -> None:  # pragma: no cover - compiled
+    """``out[m, p] = exp(j(ca·az_pos[m]·uy[p] + cb·el_pos[m]·uz[p]))``, complex64 ``(M, P)``
+    (:func:`coloradar.dsp.angle.steering` with ``ca = πρ·s_az``, ``cb = πρ·s_el``)."""
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    pe = np.empty(np.max(el_pos) + 1, np.complex128)
+    for p in range(uy.size):
+        _powers(ca, uy[p], pa)
+        _powers(cb, uz[p], pe)
+        for m in range(az_pos.size):
+            out[m, p] = pa[az_pos[m]] * pe[el_pos[m]]
+
+
+@numba.njit(inline="always")
+def _beam(x: Any, az_pos: Any, el_pos: Any, pa: Any, pe: Any) -> complex:  # pragma: no cover
+    acc = 0.0 + 0.0j
+    for m in range(az_pos.size):
+        acc += x[m] * (pa[az_pos[m]] * pe[el_pos[m]])
+    return acc
+
+
+@_jit(nogil=True)
+def newton_refine(x: Any, ca: float, cb: float, az_pos: Any, el_pos: Any, uy: Any, uz: Any,
+                  max_step_y: float, max_step_z: float, iterations: int, elevation: bool,
+                  out_uy: Any, out_uz: Any, out_power: Any) -> None:  # pragma: no cover
+    """:func:`coloradar.dsp.angle.newton_refine` of vectors ``x`` complex64 ``(K, M)``: each
+    step's beam, gradient and Hessian in one pass over the elements; writes the refined sines
+    and ``|B|²/M²`` (float64 ``(K,)``)."""
+    k_n, m_n = x.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    pe = np.empty(np.max(el_pos) + 1, np.complex128)
+    for k in range(k_n):
+        y, z = uy[k], uz[k]
+        xk = x[k]
+        _powers(ca, y, pa)
+        _powers(cb, z, pe)
+        b0 = _beam(xk, az_pos, el_pos, pa, pe)
+        p0 = b0.real * b0.real + b0.imag * b0.imag
+        for _ in range(iterations):
+            bv = sa = sb = saa = sbb = sab = 0.0 + 0.0j
+            for m in range(m_n):
+                v = xk[m] * (pa[az_pos[m]] * pe[el_pos[m]])
+                a = ca * az_pos[m]
+                b = cb * el_pos[m]
+                bv += v
+                sa += v * a
+                sb += v * b
+                saa += v * (a * a)
+                sbb += v * (b * b)
+                sab += v * (a * b)
+            by, bz = 1j * sa, 1j * sb                 # dB/du_y, dB/du_z
+            cbv = bv.conjugate()
+            gy = 2.0 * (cbv * by).real
+            gz = 2.0 * (cbv * bz).real
+            hyy = 2.0 * (abs(by) ** 2 - (cbv * saa).real)
+            hzz = 2.0 * (abs(bz) ** 2 - (cbv * sbb).real)
+            hyz = 2.0 * ((by.conjugate() * bz).real - (cbv * sab).real)
+            sy = sz = 0.0
+            if elevation:
+                det = hyy * hzz - hyz * hyz
+                if hyy < 0 and det > 0:
+                    sy = -(hzz * gy - hyz * gz) / det
+                    sz = -(hyy * gz - hyz * gy) / det
+            elif hyy < 0:
+                sy = -gy / hyy
+            sy = min(max(sy, -max_step_y), max_step_y)
+            sz = min(max(sz, -max_step_z), max_step_z)
+            _powers(ca, y + sy, pa)
+            _powers(cb, z + sz, pe)
+            b1 = _beam(xk, az_pos, el_pos, pa, pe)
+            p1 = b1.real * b1.real + b1.imag * b1.imag
+            if p1 > p0:
+                y, z, p0 = y + sy, z + sz, p1
+            else:                                     # phasors of the point kept
+                _powers(ca, y, pa)
+                _powers(cb, z, pe)
+        out_uy[k], out_uz[k] = y, z
+        out_power[k] = p0 / (m_n * m_n)
+
+
+@numba.njit(inline="always")
+def _log_parabola(v0: float, v1: float, v2: float) -> float:  # pragma: no cover - compiled
+    # coloradar.dsp.angle.refine_peak's offset (circular axis)
+    l0 = math.log(max(v0, 1e-300))
+    l1 = math.log(max(v1, 1e-300))
+    l2 = math.log(max(v2, 1e-300))
+    den = l0 - 2.0 * l1 + l2
+    if not den < 0:
+        return 0.0
+    return min(max(0.5 * (l0 - l2) / den, -0.5), 0.5)
+
+
+@_jit(nogil=True)
+def elevation_search(x: Any, ca: float, az_pos: Any, row: Any, row_steer: Any, el_sines: Any,
+                     uy: Any, rho: float, out_uz: Any, out_power: Any) -> None:  # pragma: no cover
+    """Strongest elevation beam of each vector ``x`` complex64 ``(P, M)`` along its azimuth
+    ``uy``: elements steered in azimuth and summed per elevation row (``row[m]``), the rows
+    beamformed with ``row_steer`` complex64 ``(rows, n_el)`` over the grid's elevation sines
+    (invisible directions give 0), the first maximum refined by a log-parabola (circular);
+    writes its sine (``rho`` the grid's element spacing in half wavelengths) and
+    ``|B|²/M²``."""
+    p_n, m_n = x.shape
+    n_rows, ne = row_steer.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    acc = np.empty(n_rows, np.complex128)
+    bz = np.empty(ne)
+    for p in range(p_n):
+        _powers(ca, uy[p], pa)
+        acc[:] = 0.0
+        for m in range(m_n):
+            acc[row[m]] += x[p, m] * pa[az_pos[m]]
+        u2 = uy[p] * uy[p]
+        best, ie = -1.0, 0
+        for e in range(ne):
+            b = 0.0
+            if u2 + el_sines[e] * el_sines[e] <= 1.0:
+                v = 0.0 + 0.0j
+                for q in range(n_rows):
+                    v += acc[q] * row_steer[q, e]
+                b = v.real * v.real + v.imag * v.imag
+            bz[e] = b
+            if b > best:
+                best, ie = b, e
+        fe = ie + _log_parabola(bz[(ie - 1) % ne], bz[ie], bz[(ie + 1) % ne])
+        out_uz[p] = 2.0 * (fe - ne // 2) / (ne * rho)
+        out_power[p] = bz[ie] / (m_n * m_n)
+
+
+@_jit(nogil=True)
+def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d: Any, r: Any,
+                       alias: Any, tdm: bool, steer: Any, out: Any) -> None:  # pragma: no cover
+    """Beam power ``|Σ_m v_m·steer[m, p]|²/M²`` of each point's direction in the 3 × 3 cells
+    around its range–Doppler cell (``out`` float64 ``(P, 3, 3)``, Doppler then range offset
+    −1..1). ``rd`` complex64 ``(channels, doppler, range)`` (TDM-compensated at bin centres),
+    element ``m`` read from channel ``chan[m]`` of TX slot ``tx_of[m]``; ``nxt`` ``(channels,
+    doppler)`` the range bin after the last (or ``(0, 0)``); a Doppler neighbour across the
+    edge gets the TDM phase of the unwrapped bin, every cell the point's alias phase."""
+    _, nd, nr = rd.shape
+    m_n = chan.size
+    m2 = float(m_n * m_n)
+    ph = np.empty(num_tx, np.complex128)
+    for p in range(d.size):
+        for i in range(3):
+            dd = d[p] + i - 1
+            dn = dd % nd
+            for t in range(num_tx):
+                ang = -2.0 * math.pi * t * alias[p] / num_tx
+                if tdm:
+                    ang -= 2.0 * math.pi * t * (dd - dn) / (nd * num_tx)
+                ph[t] = complex(math.cos(ang), math.sin(ang))
+            for k in range(3):
+                rn = min(max(r[p] + k - 1, 0), nr - 1)
+                beyond = k == 2 and nxt.shape[0] > 0 and r[p] + 1 >= nr
+                acc = 0.0 + 0.0j
+                for m in range(m_n):
+                    v = nxt[chan[m], dn] if beyond else rd[chan[m], dn, rn]
+                    acc += v * ph[tx_of[m]] * steer[m, p]
+                out[p, i, k] = (acc.real * acc.real + acc.imag * acc.imag) / m2
+
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
 peak_over_doppler_planar = _Announced(peak_over_doppler_planar)
 prepare_chirps = _Announced(prepare_chirps)
+beam_neighbourhood = _Announced(beam_neighbourhood)
+elevation_search = _Announced(elevation_search)
+newton_refine = _Announced(newton_refine)
+steer_columns = _Announced(steer_columns)

@@ -476,6 +476,28 @@ class RadarProcessor:
         # The last processed range bin: a tone within half a bin of it gives at most this
         # power ratio to the bin before (window main lobe); beyond it, more.
         self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
+        self._beam_kernels = self._init_beam_kernels()
+
+    def _init_beam_kernels(self) -> dict[str, Any] | None:
+        """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
+        used with the numba engine for far-field beams (near-field focusing stays numpy)."""
+        s, dg = self.settings, self.detection_grid
+        if self._engine != "numba" or s.near_field:
+            return None
+        from . import _kernels
+        nrx = self.calib.frame_shape[1]
+        first = self.calib.antenna.virtual.first_pair
+        _, row = np.unique(dg.el_pos, return_inverse=True)
+        return {"k": _kernels,
+                "ca": float(np.pi * dg.rho * dg.azimuth_sign),
+                "cb": float(np.pi * dg.rho * dg.elevation_sign),
+                "az": np.ascontiguousarray(dg.az_pos, dtype=np.int64),
+                "el": np.ascontiguousarray(dg.el_pos, dtype=np.int64),
+                "row": np.ascontiguousarray(row, dtype=np.int64),
+                "row_steer": np.ascontiguousarray(self._row_steer),
+                "el_sines": np.ascontiguousarray(dg.el_sines, dtype=np.float64),
+                "chan": np.ascontiguousarray(first[:, 0] * nrx + first[:, 1], dtype=np.int64),
+                "tx": np.ascontiguousarray(first[:, 0], dtype=np.int64)}
 
     # ------------------------------------------------------------------ cubes
     def _check(self, adc: np.ndarray) -> np.ndarray:
@@ -866,6 +888,11 @@ class RadarProcessor:
         """Beam weights ``(M, P)`` complex64 at direction sines ``(u_y, u_z)``, focused at range
         ``rho`` from the phase centre: ``B(u) = Σ_m x_m w_m / M`` is ``s`` for a source
         ``s`` at ``(rho, u)``."""
+        kb = self._beam_kernels
+        if kb is not None:
+            w = np.empty((self.detection_grid.num_elements, np.size(uy)), dtype=np.complex64)
+            kb["k"].steer_columns(kb["ca"], kb["cb"], kb["az"], kb["el"], _f64(uy), _f64(uz), w)
+            return w
         w = steering(self.detection_grid, uy, uz)
         if self.settings.near_field:
             w = w * self._near.focus(sines_to_unit(uy, uz), rho)
@@ -898,6 +925,13 @@ class RadarProcessor:
         refine = s.angle_refine and s.angle_method == "fft"
 
         def newton(xv: np.ndarray, uy0: np.ndarray, uz0: np.ndarray, rr: np.ndarray):
+            kb = self._beam_kernels
+            if kb is not None:
+                out = np.empty((3, np.size(uy0)))
+                kb["k"].newton_refine(_c64(xv), kb["ca"], kb["cb"], kb["az"], kb["el"],
+                                      _f64(uy0), _f64(uz0), step[0], step[1], 2, True, out[0],
+                                      out[1], out[2])
+                return out[0], out[1], out[2]
             if not self.settings.near_field:
                 return newton_refine(g, xv, uy0, uz0, step)
             f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
@@ -1006,6 +1040,12 @@ class RadarProcessor:
         g = self.detection_grid
         if x.shape[0] == 0:
             return np.zeros(0), np.zeros(0)
+        kb = self._beam_kernels
+        if kb is not None:
+            out = np.empty((2, uy.size))
+            kb["k"].elevation_search(_c64(x), kb["ca"], kb["az"], kb["row"], kb["row_steer"],
+                                     kb["el_sines"], _f64(uy), float(g.rho), out[0], out[1])
+            return out[0], out[1]
         wa = self._steer(uy, np.zeros(uy.size), rho)                   # (M, P)
         # (einsum, not BLAS: threaded BLAS sums in an order that varies between runs, and
         # batch processing promises the bytes of serial processing)
@@ -1071,10 +1111,20 @@ class RadarProcessor:
         unwrapped neighbour) and the point's alias; range neighbours beyond the map repeat
         the edge cell.
         """
-        ntx, _, nd, nr = rd.shape
+        ntx, nrx, nd, nr = rd.shape
         p = d.size
         out = np.zeros((p, 3, 3))
         if p == 0:
+            return out
+        kb = self._beam_kernels
+        if kb is not None and self.settings.overlap == "first":
+            nxt = (rd_next[..., 0].reshape(ntx * nrx, nd)
+                   if rd_next is not None and rd_next.shape[-1] else np.zeros((0, 0)))
+            kb["k"].beam_neighbourhood(
+                _c64(rd.reshape(ntx * nrx, nd, nr)), _c64(nxt), kb["chan"], kb["tx"], ntx,
+                np.ascontiguousarray(d, dtype=np.int64), np.ascontiguousarray(r, dtype=np.int64),
+                _f64(np.zeros(p) if alias is None else alias), self._tdm is not None,
+                _c64(steer), out)
             return out
         m2 = float(self.detection_grid.num_elements) ** 2
         for i, j in enumerate((-1, 0, 1)):
@@ -1221,6 +1271,16 @@ class RadarProcessor:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
                    if getattr(self.settings, f.name) != f.default}
         return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+def _f64(a: Any) -> np.ndarray:
+    """Contiguous float64 (the dtype and layout the compiled kernels are built for)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _c64(a: Any) -> np.ndarray:
+    """Contiguous complex64 (the dtype and layout the compiled kernels are built for)."""
+    return np.ascontiguousarray(a, dtype=np.complex64)
 
 
 def _power_sum(cube: np.ndarray) -> np.ndarray:
