@@ -25,7 +25,7 @@ import numba
 import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
-           "newton_refine", "peak_over_doppler", "peak_over_doppler_planar", "prepare_chirps",
+           "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar", "prepare_chirps",
            "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
@@ -674,24 +674,81 @@ def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d:
     _, nd, nr = rd.shape
     m_n = chan.size
     m2 = float(m_n * m_n)
-    ph = np.empty(num_tx, np.complex128)
+    ph = np.empty((3, num_tx), np.complex128)
+    acc = np.empty((3, 3), np.complex128)
+    dn = np.empty(3, np.int64)
+    rn = np.empty(3, np.int64)
     for p in range(d.size):
         for i in range(3):
             dd = d[p] + i - 1
-            dn = dd % nd
+            dn[i] = dd % nd
+            rn[i] = min(max(r[p] + i - 1, 0), nr - 1)
             for t in range(num_tx):
                 ang = -2.0 * math.pi * t * alias[p] / num_tx
                 if tdm:
-                    ang -= 2.0 * math.pi * t * (dd - dn) / (nd * num_tx)
-                ph[t] = complex(math.cos(ang), math.sin(ang))
+                    ang -= 2.0 * math.pi * t * (dd - dn[i]) / (nd * num_tx)
+                ph[i, t] = complex(math.cos(ang), math.sin(ang))
+        beyond = nxt.shape[0] > 0 and r[p] + 1 >= nr
+        acc[:] = 0.0
+        # element-major: each element's 3 × 3 cells lie in 3 short rows of its channel
+        for m in range(m_n):
+            c, t = chan[m], tx_of[m]
+            s = complex(steer[m, p])
+            for i in range(3):
+                f = ph[i, t] * s
+                di = dn[i]
+                acc[i, 0] += rd[c, di, rn[0]] * f
+                acc[i, 1] += rd[c, di, rn[1]] * f
+                acc[i, 2] += (nxt[c, di] if beyond else rd[c, di, rn[2]]) * f
+        for i in range(3):
             for k in range(3):
-                rn = min(max(r[p] + k - 1, 0), nr - 1)
-                beyond = k == 2 and nxt.shape[0] > 0 and r[p] + 1 >= nr
-                acc = 0.0 + 0.0j
-                for m in range(m_n):
-                    v = nxt[chan[m], dn] if beyond else rd[chan[m], dn, rn]
-                    acc += v * ph[tx_of[m]] * steer[m, p]
-                out[p, i, k] = (acc.real * acc.real + acc.imag * acc.imag) / m2
+                v = acc[i, k]
+                out[p, i, k] = (v.real * v.real + v.imag * v.imag) / m2
+
+
+@_jit(nogil=True)
+def joint_amplitudes(x: Any, w: Any, starts: Any, out: Any) -> None:  # pragma: no cover
+    """Least-squares amplitudes of every cell's sources: the peaks ``starts[c] …
+    starts[c + 1] − 1`` belong to cell ``c`` (``starts`` ends with P), whose vector is
+    ``x[starts[c]]`` (complex64 ``(P, M)``, one row per peak) and whose sources are the
+    columns ``conj(w[:, p])`` (complex64 ``(M, P)``). A lone source gets its beam value
+    ``Σ_m x_m w_m / M``; several are solved jointly (normal equations, Gaussian elimination
+    with partial pivoting). Writes complex128 ``out`` ``(P,)``."""
+    m_n = x.shape[1]
+    for c in range(starts.size - 1):
+        s0, n = starts[c], starts[c + 1] - starts[c]
+        if n == 1:
+            acc = 0.0 + 0.0j
+            for m in range(m_n):
+                acc += x[s0, m] * w[m, s0]
+            out[s0] = acc / m_n
+            continue
+        g = np.zeros((n, n + 1), np.complex128)          # [Gram | right-hand side]
+        for i in range(n):
+            for m in range(m_n):
+                wi = complex(w[m, s0 + i])
+                g[i, n] += wi * x[s0, m]
+                for j in range(i, n):
+                    g[i, j] += wi * complex(w[m, s0 + j]).conjugate()
+            for j in range(i):
+                g[i, j] = g[j, i].conjugate()
+        for col in range(n):
+            piv = col
+            for i in range(col + 1, n):
+                if abs(g[i, col]) > abs(g[piv, col]):
+                    piv = i
+            if piv != col:
+                for j in range(n + 1):
+                    g[col, j], g[piv, j] = g[piv, j], g[col, j]
+            for i in range(col + 1, n):
+                f = g[i, col] / g[col, col]
+                for j in range(col, n + 1):
+                    g[i, j] -= f * g[col, j]
+        for i in range(n - 1, -1, -1):
+            v = g[i, n]
+            for j in range(i + 1, n):
+                v -= g[i, j] * out[s0 + j]
+            out[s0 + i] = v / g[i, i]
 
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
@@ -700,5 +757,6 @@ peak_over_doppler_planar = _Announced(peak_over_doppler_planar)
 prepare_chirps = _Announced(prepare_chirps)
 beam_neighbourhood = _Announced(beam_neighbourhood)
 elevation_search = _Announced(elevation_search)
+joint_amplitudes = _Announced(joint_amplitudes)
 newton_refine = _Announced(newton_refine)
 steer_columns = _Announced(steer_columns)

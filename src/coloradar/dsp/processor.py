@@ -1061,12 +1061,18 @@ class RadarProcessor:
         uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
         return uz, bz[k, ie] / float(g.num_elements) ** 2
 
-    @staticmethod
-    def _joint_amplitudes(x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
+    def _joint_amplitudes(self, x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
                           rank: np.ndarray) -> np.ndarray:
         """Least-squares amplitudes of every cell's sources, batched: the sources of a cell
         are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak. A cell
         with one source gets its beam value; only cells with several are solved."""
+        kb = self._beam_kernels
+        if kb is not None and cell_of.size and np.all(np.diff(cell_of) >= 0):
+            # (the peaks of a cell are consecutive, as _resolve_peaks keeps them)
+            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1], True])
+            amps = np.empty(cell_of.size, dtype=np.complex128)
+            kb["k"].joint_amplitudes(_c64(x), _c64(w), starts.astype(np.int64), amps)
+            return amps
         out = np.einsum("pm,mp->p", x, w) / float(w.shape[0])
         counts = np.bincount(cell_of)
         multi = counts[cell_of] > 1
