@@ -667,10 +667,11 @@ def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d:
                        alias: Any, tdm: bool, steer: Any, out: Any) -> None:  # pragma: no cover
     """Beam power ``|Σ_m v_m·steer[m, p]|²/M²`` of each point's direction in the 3 × 3 cells
     around its range–Doppler cell (``out`` float64 ``(P, 3, 3)``, Doppler then range offset
-    −1..1). ``rd`` complex64 ``(channels, doppler, range)`` (TDM-compensated at bin centres),
-    element ``m`` read from channel ``chan[m]`` of TX slot ``tx_of[m]``; ``nxt`` ``(channels,
-    doppler)`` the range bin after the last (or ``(0, 0)``); a Doppler neighbour across the
-    edge gets the TDM phase of the unwrapped bin, every cell the point's alias phase."""
+    −1..1). ``rd`` complex64 ``(channels, doppler, range)`` without TDM phases (Doppler index
+    ``i`` ↔ signed bin ``i − doppler//2``), element ``m`` read from channel ``chan[m]`` of TX
+    slot ``tx_of[m]``; ``nxt`` ``(channels, doppler)`` the range bin after the last (or
+    ``(0, 0)``). With ``tdm`` each cell gets the TDM phase of its Doppler bin (a neighbour
+    across the edge: of the unwrapped bin), every cell the point's alias phase."""
     _, nd, nr = rd.shape
     m_n = chan.size
     m2 = float(m_n * m_n)
@@ -685,8 +686,8 @@ def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d:
             rn[i] = min(max(r[p] + i - 1, 0), nr - 1)
             for t in range(num_tx):
                 ang = -2.0 * math.pi * t * alias[p] / num_tx
-                if tdm:
-                    ang -= 2.0 * math.pi * t * (dd - dn[i]) / (nd * num_tx)
+                if tdm:                                   # at the unwrapped bin
+                    ang -= 2.0 * math.pi * t * (dd - nd // 2) / (nd * num_tx)
                 ph[i, t] = complex(math.cos(ang), math.sin(ang))
         beyond = nxt.shape[0] > 0 and r[p] + 1 >= nr
         acc[:] = 0.0

@@ -547,13 +547,20 @@ class RadarProcessor:
         out = out[..., :keep]
         return out.reshape(ntx, nrx, nc, -1) if channels is None else out
 
-    def _doppler(self, rcube: np.ndarray) -> np.ndarray:
+    def _doppler(self, rcube: np.ndarray, compensate: bool = True) -> np.ndarray:
+        """Doppler FFT of a range cube; ``compensate=False`` leaves out the TDM phases
+        (detection applies them to the few cells it reads, :meth:`_tdm_at`)."""
         v = sfft.fft(rcube, n=self.doppler_fft_size, axis=2, workers=self.settings.workers)
         if self.doppler_fft_size % 2:
             v = sfft.fftshift(v, axes=2)
-        if self._tdm is not None:
+        if compensate and self._tdm is not None:
             v *= self._tdm
         return v
+
+    def _tdm_at(self, d: np.ndarray) -> np.ndarray | None:
+        """Bin-centre TDM phases of Doppler bins ``d``, complex64 ``(tx, 1, K)`` (the factors
+        :meth:`_doppler` multiplies the cube by), or None without TDM compensation."""
+        return None if self._tdm is None else self._tdm[:, :, d, 0]
 
     def range_doppler(self, adc: np.ndarray) -> np.ndarray:
         """Calibrated, TDM-compensated range–Doppler cube.
@@ -689,8 +696,8 @@ class RadarProcessor:
         """
         rcube = self._range_cube(adc, extra=True)
         nr = self.num_range_bins
-        return self._detect(rcube[..., :nr], self._doppler(rcube[..., :nr]),
-                            self._doppler(rcube[..., nr:]))
+        return self._detect(rcube[..., :nr], self._doppler(rcube[..., :nr], compensate=False),
+                            self._doppler(rcube[..., nr:], compensate=False))
 
     def _detection_map(self, rd: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
@@ -748,9 +755,11 @@ class RadarProcessor:
 
     def _detect(self, rcube: np.ndarray, rd: np.ndarray, rd_next: np.ndarray | None = None
                 ) -> Detections:
-        """Detections of a range–Doppler cube; ``rd_next`` (tx, rx, doppler, 1 or 0): the range
-        bin after the last one, when computed (a return beyond the processed range then makes
-        no local maximum at the last bin)."""
+        """Detections of a range–Doppler cube ``rd`` *without* its TDM phases
+        (``_doppler(…, compensate=False)``: the power map does not need them, and the cells
+        read get them from :meth:`_tdm_at`); ``rd_next`` (tx, rx, doppler, 1 or 0), the same
+        for the range bin after the last one, when computed (a return beyond the processed
+        range then makes no local maximum at the last bin)."""
         s = self.settings
         stat, plain, looks, sig2 = self._detection_map(rd)
         nxt = None
@@ -792,7 +801,8 @@ class RadarProcessor:
         ntx = rd.shape[0]
         vecs = rd[:, :, d, r]                                           # (tx, rx, K)
         if self._tdm is not None:
-            # rd holds bin-centre compensation; add the fractional remainder.
+            # bin-centre compensation, then the fractional remainder
+            vecs = vecs * self._tdm_at(d)
             vecs = vecs * tdm_phase(ntx, d_ref - d, nd)[:, None, :]
         alias, spec = self._choose_alias(vecs, k_signed)
         if alias is not None:
@@ -1113,9 +1123,9 @@ class RadarProcessor:
         """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
         around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
 
-        Each Doppler bin keeps its own TDM compensation (across the Doppler edge that of the
-        unwrapped neighbour) and the point's alias; range neighbours beyond the map repeat
-        the edge cell.
+        ``rd`` and ``rd_next`` without TDM phases (as :meth:`_detect`). Each Doppler bin gets
+        its own TDM compensation (across the Doppler edge that of the unwrapped neighbour)
+        and the point's alias; range neighbours beyond the map repeat the edge cell.
         """
         ntx, nrx, nd, nr = rd.shape
         p = d.size
@@ -1147,6 +1157,8 @@ class RadarProcessor:
                 if jr == 1 and rd_next is not None and rd_next.shape[-1]:
                     beyond = r + 1 >= nr
                     v = np.where(beyond[None, None, :], rd_next[:, :, dn, 0], v)
+                if self._tdm is not None:
+                    v = v * self._tdm_at(dn)
                 if ph is not None:
                     v = v * ph[:, None, :]
                 el = combine_channels(v, self.calib.antenna.virtual, self.settings.overlap)
@@ -1177,6 +1189,8 @@ class RadarProcessor:
         ntx = rd.shape[0]
         jd, jr = exp_d[pj], exp_r[pj]
         v = rd[:, :, jd, jr]
+        if self._tdm is not None:
+            v = v * self._tdm_at(jd)
         if alias is not None:
             v = v * alias_phase(ntx, alias[pi])[:, None, :]
         el = combine_channels(v, self.calib.antenna.virtual, s.overlap)
@@ -1265,9 +1279,13 @@ class RadarProcessor:
         """
         nr = self.num_range_bins
         rcube = self._range_cube(adc, extra=pointcloud)
-        rd = self._doppler(rcube[..., :nr])
-        pts = (self._detect(rcube[..., :nr], rd, self._doppler(rcube[..., nr:])).pointcloud()
-               if pointcloud else None)
+        rd = self._doppler(rcube[..., :nr], compensate=not pointcloud)
+        pts = None
+        if pointcloud:
+            pts = self._detect(rcube[..., :nr], rd,
+                               self._doppler(rcube[..., nr:], compensate=False)).pointcloud()
+            if heatmap and self._tdm is not None:
+                rd *= self._tdm                      # as _doppler: the heatmap's bits
         if not heatmap:
             return None, pts
         return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
