@@ -525,12 +525,16 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
 
 @numba.njit(inline="always")
 def _powers(c: float, u: float, out: Any) -> None:  # pragma: no cover - compiled
-    # out[k] = exp(j·c·u·k), k = 0 … len − 1, by repeated multiplication (error ~k·1e-16)
+    # out[k] = exp(j·c·u·k), k = 0 … len − 1: the first 8 by repeated multiplication, then
+    # each from the one 8 before (independent products that pipeline; error ~k·1e-16)
     e = complex(math.cos(c * u), math.sin(c * u))
+    n = out.size
     v = 1.0 + 0.0j
-    for k in range(out.size):
+    for k in range(min(n, 8)):
         out[k] = v
         v *= e
+    for k in range(8, n):                           # v = e⁸ here
+        out[k] = out[k - 8] * v
 
 
 @_jit(nogil=True)
@@ -639,24 +643,44 @@ def elevation_search(x: Any, ca: float, az_pos: Any, row: Any, row_steer: Any, e
     n_rows, ne = row_steer.shape
     pa = np.empty(np.max(az_pos) + 1, np.complex128)
     acc = np.empty(n_rows, np.complex128)
+    order = np.argsort(row, kind="mergesort")      # elements grouped by row
+    row_start = np.zeros(n_rows + 1, np.int64)
+    for m in range(m_n):
+        row_start[row[m] + 1] += 1
+    for q in range(n_rows):
+        row_start[q + 1] += row_start[q]
+    sr = np.empty((n_rows, ne))
+    si = np.empty((n_rows, ne))
+    for q in range(n_rows):
+        for e in range(ne):
+            sr[q, e] = row_steer[q, e].real
+            si[q, e] = row_steer[q, e].imag
+    s2 = el_sines * el_sines
+    vr = np.empty(ne)
+    vi = np.empty(ne)
     bz = np.empty(ne)
     for p in range(p_n):
         _powers(ca, uy[p], pa)
-        acc[:] = 0.0
-        for m in range(m_n):
-            acc[row[m]] += x[p, m] * pa[az_pos[m]]
-        u2 = uy[p] * uy[p]
-        best, ie = -1.0, 0
+        for q in range(n_rows):                  # each row's elements in turn
+            a = 0.0 + 0.0j
+            for i in range(row_start[q], row_start[q + 1]):
+                m = order[i]
+                a += x[p, m] * pa[az_pos[m]]
+            acc[q] = a
+        vr[:] = 0.0
+        vi[:] = 0.0
+        for q in range(n_rows):                  # elevation bins innermost (vectorised)
+            ar, ai = acc[q].real, acc[q].imag
+            for e in range(ne):
+                vr[e] += ar * sr[q, e] - ai * si[q, e]
+                vi[e] += ar * si[q, e] + ai * sr[q, e]
+        lim = 1.0 - uy[p] * uy[p]
         for e in range(ne):
-            b = 0.0
-            if u2 + el_sines[e] * el_sines[e] <= 1.0:
-                v = 0.0 + 0.0j
-                for q in range(n_rows):
-                    v += acc[q] * row_steer[q, e]
-                b = v.real * v.real + v.imag * v.imag
-            bz[e] = b
-            if b > best:
-                best, ie = b, e
+            bz[e] = vr[e] * vr[e] + vi[e] * vi[e] if s2[e] <= lim else 0.0
+        ie = 0
+        for e in range(1, ne):
+            if bz[e] > bz[ie]:
+                ie = e
         fe = ie + _log_parabola(bz[(ie - 1) % ne], bz[ie], bz[(ie + 1) % ne])
         out_uz[p] = 2.0 * (fe - ne // 2) / (ne * rho)
         out_power[p] = bz[ie] / (m_n * m_n)
