@@ -977,6 +977,18 @@ class RadarProcessor:
         uy, uz, peak, w, ci, x, rho, rank, cell_of = (
             uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep], x[keep], rho[keep],
             rank[keep], cell_of[keep])
+        lone = None
+        several = np.bincount(cell_of)[cell_of] > 1
+        if not several.all():
+            # Cells with one source are final. Every step below works cell by cell, so only
+            # the cells with several take part (the same numbers, smaller arrays); the lone
+            # ones join them again at the end, in cell order.
+            one = ~several
+            lone = uy[one], uz[one], peak[one], w[:, one], ci[one]
+            uy, uz, peak, w, ci, x, rho, rank = (uy[several], uz[several], peak[several],
+                                                 w[:, several], ci[several], x[several],
+                                                 rho[several], rank[several])
+            _, cell_of = np.unique(ci, return_inverse=True)
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
@@ -1008,6 +1020,11 @@ class RadarProcessor:
         amps = self._joint_amplitudes(x, w, cell_of, rank)
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
+        if lone is not None:
+            order = np.argsort(np.r_[lone[4], ci], kind="stable")
+            uy, uz, peak, ci = (np.r_[a, b][order] for a, b in zip(
+                (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
+            w = np.concatenate([lone[3], w], axis=1)[:, order]
         return uy, uz, peak, w, ci
 
     def _residual_floor(self, x: np.ndarray, w: np.ndarray, amps: np.ndarray,
