@@ -25,8 +25,8 @@ import numba
 import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
-           "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar", "prepare_chirps",
-           "steer_columns"]
+           "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
+           "prepare_chirps", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""

@@ -386,6 +386,7 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
             return CFARResult(power > res.threshold, res.threshold, res.noise, res.scale)
         return first
     alpha: float | np.ndarray
+    count: float | np.ndarray
     if kind == "ca":
         if truncate:
             count = _truncated_counts(x.shape, g, h, modes, 0, 0)
