@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from math import comb
+from math import comb, prod
 from typing import Literal, get_args
 
 import numpy as np
@@ -94,10 +94,10 @@ def cfar_window(guard: tuple[int, ...], train: tuple[int, ...], split_axis: int 
     """Training cells ``N`` in total and ``n`` in each GO/SO half for a window geometry."""
     ax = split_axis % len(guard)
     h = [g + t for g, t in zip(guard, train, strict=True)]
-    outer = int(np.prod([2 * x + 1 for x in h]))
-    inner = int(np.prod([2 * g + 1 for g in guard]))
-    half_outer = int(np.prod([2 * x + 1 for i, x in enumerate(h) if i != ax])) * h[ax]
-    half_inner = int(np.prod([2 * g + 1 for i, g in enumerate(guard) if i != ax])) * guard[ax]
+    outer = prod(2 * x + 1 for x in h)
+    inner = prod(2 * g + 1 for g in guard)
+    half_outer = prod(2 * x + 1 for i, x in enumerate(h) if i != ax) * h[ax]
+    half_inner = prod(2 * g + 1 for i, g in enumerate(guard) if i != ax) * guard[ax]
     return outer - inner, half_outer - half_inner
 
 

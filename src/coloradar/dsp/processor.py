@@ -391,6 +391,7 @@ class RadarProcessor:
         self._tdm = None
         if s.tdm_compensation:
             self._tdm = tdm_phase(ntx, signed_doppler_bins(nd), nd)[:, None, :, None]
+            self._tdm_table = np.ascontiguousarray(self._tdm[:, 0, :, 0])         # (tx, doppler)
 
         self.grid = angle_grid(calib.antenna, w.center_frequency, hm.num_elevation_bins,
                                hm.num_azimuth_bins, s.azimuth_sign, s.elevation_sign)
@@ -560,7 +561,7 @@ class RadarProcessor:
     def _tdm_at(self, d: np.ndarray) -> np.ndarray | None:
         """Bin-centre TDM phases of Doppler bins ``d``, complex64 ``(tx, 1, K)`` (the factors
         :meth:`_doppler` multiplies the cube by), or None without TDM compensation."""
-        return None if self._tdm is None else self._tdm[:, :, d, 0]
+        return None if self._tdm is None else self._tdm_table[:, d][:, None, :]
 
     def range_doppler(self, adc: np.ndarray) -> np.ndarray:
         """Calibrated, TDM-compensated range–Doppler cube.
