@@ -26,7 +26,7 @@ import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
            "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "prepare_chirps", "steer_columns"]
+           "prepare_chirps", "secondary_residual", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -775,6 +775,34 @@ def joint_amplitudes(x: Any, w: Any, starts: Any, out: Any) -> None:  # pragma: 
                 v -= g[i, j] * out[s0 + j]
             out[s0 + i] = v / g[i, i]
 
+
+@_jit(nogil=True)
+def secondary_residual(x: Any, w: Any, first: Any, resid: Any, top: Any) -> None:  # pragma: no cover
+    """For every peak ``p`` of a cell whose strongest peak is ``first[p]``: the beam of the
+    cell's vector less the strongest source's fit, ``|s_p − s_f·c_fp|²`` with ``s`` the beam
+    values ``Σ_m x_m w_m / M`` and ``c_fp = Σ_m conj(w_mf) w_mp / M`` the array's cross
+    pattern (``resid``), and ``|s_f|²`` (``top``); float64 ``(P,)``. ``x`` complex64 ``(P, M)``,
+    ``w`` complex64 ``(M, P)``."""
+    p_n, m_n = x.shape
+    amp = np.empty(p_n, np.complex128)
+    for p in range(p_n):
+        acc = 0.0 + 0.0j
+        for m in range(m_n):
+            acc += x[p, m] * w[m, p]
+        amp[p] = acc / m_n
+    for p in range(p_n):
+        f = first[p]
+        a = amp[f]
+        top[p] = a.real * a.real + a.imag * a.imag
+        if f == p:
+            resid[p] = top[p]
+            continue
+        c = 0.0 + 0.0j
+        for m in range(m_n):
+            c += complex(w[m, f]).conjugate() * w[m, p]
+        v = amp[p] - a * (c / m_n)
+        resid[p] = v.real * v.real + v.imag * v.imag
+
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
@@ -784,4 +812,5 @@ beam_neighbourhood = _Announced(beam_neighbourhood)
 elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)
 newton_refine = _Announced(newton_refine)
+secondary_residual = _Announced(secondary_residual)
 steer_columns = _Announced(steer_columns)

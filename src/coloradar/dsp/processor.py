@@ -958,13 +958,19 @@ class RadarProcessor:
             return uy, uz, peak, w, ci
         # amplitude of each cell's strongest source and its response in the other directions
         first = np.flatnonzero(primary)[np.cumsum(primary) - 1]        # primary peak of each
-        amp = np.einsum("pm,mp->p", x, w) / m
         sec = ~primary
-        cross = np.einsum("mp,mp->p", np.conj(w[:, first[sec]]), w[:, sec]) / m
-        resid = np.abs(amp[sec] - amp[first[sec]] * cross) ** 2
+        kb = self._beam_kernels
+        if kb is not None:
+            resid, top = np.empty((2, ci.size))
+            kb["k"].secondary_residual(_c64(x), _c64(w), first.astype(np.int64), resid, top)
+            resid, top = resid[sec], top[sec]
+        else:
+            amp = np.einsum("pm,mp->p", x, w) / m
+            cross = np.einsum("mp,mp->p", np.conj(w[:, first[sec]]), w[:, sec]) / m
+            resid = np.abs(amp[sec] - amp[first[sec]] * cross) ** 2
+            top = np.abs(amp[first[sec]]) ** 2
         ok = np.ones(ci.size, dtype=bool)
-        ok[sec] = (resid >= floor[ci[sec]]) & (
-            resid >= np.abs(amp[first[sec]]) ** 2 * self._angle_dynamic)
+        ok[sec] = (resid >= floor[ci[sec]]) & (resid >= top * self._angle_dynamic)
         uy, uz, peak, w, ci, x, rho = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok], x[ok],
                                        rho[ok])
         # Joint least-squares amplitudes of each cell's remaining sources (sidelobes of a
