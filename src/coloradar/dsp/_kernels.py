@@ -26,7 +26,7 @@ import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
            "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "prepare_chirps", "secondary_residual", "steer_columns"]
+           "prepare_chirps", "secondary_bound", "secondary_residual", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -803,6 +803,41 @@ def secondary_residual(x: Any, w: Any, first: Any, resid: Any, top: Any) -> None
         v = amp[p] - a * (c / m_n)
         resid[p] = v.real * v.real + v.imag * v.imag
 
+
+@_jit(nogil=True)
+def secondary_bound(x: Any, w_first: Any, first: Any, uy: Any, ca: float, az_pos: Any,
+                    row: Any, n_rows: int, out_bound: Any, out_top: Any) -> None:  # pragma: no cover
+    """Upper bound, over every elevation, of the residual beam power of secondary peaks.
+
+    Peak ``p`` (vector ``x[p]`` complex64 ``(P, M)``, azimuth sine ``uy[p]``) belongs to a
+    cell whose strongest source has weights ``w_first[:, first[p]]`` (complex64
+    ``(M, F)``) and beam value ``s_f = Σ_m x_m w_m / M``; the cell's vector less that source's
+    fit, ``r = x − s_f·conj(w_f)``, steered in azimuth and summed per elevation row
+    (``row[m]``, ``n_rows`` rows) gives ``A_q``, and ``|Σ_m r_m w_m(u)|/M ≤ Σ_q |A_q| / M``
+    whatever the elevation of ``u`` (each row's elevation phase has modulus 1). Writes that
+    bound squared (``out_bound``) and ``|s_f|²`` (``out_top``), float64 ``(P,)``.
+    """
+    p_n, m_n = x.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    acc = np.empty(n_rows, np.complex128)
+    for p in range(p_n):
+        f = first[p]
+        a = 0.0 + 0.0j
+        for m in range(m_n):
+            a += x[p, m] * w_first[m, f]
+        a /= m_n
+        out_top[p] = a.real * a.real + a.imag * a.imag
+        _powers(ca, uy[p], pa)
+        acc[:] = 0.0
+        for m in range(m_n):
+            r = x[p, m] - a * complex(w_first[m, f]).conjugate()
+            acc[row[m]] += r * pa[az_pos[m]]
+        b = 0.0
+        for q in range(n_rows):
+            b += abs(acc[q])
+        b /= m_n
+        out_bound[p] = b * b
+
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
@@ -812,5 +847,6 @@ beam_neighbourhood = _Announced(beam_neighbourhood)
 elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)
 newton_refine = _Announced(newton_refine)
+secondary_bound = _Announced(secondary_bound)
 secondary_residual = _Announced(secondary_residual)
 steer_columns = _Announced(steer_columns)

@@ -836,7 +836,15 @@ class RadarProcessor:
             fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
                                        prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
             uy = 2.0 * (fa - na // 2) / (na * self.detection_grid.rho)
-            uz, peak = self._elevation_search(vectors[ci], uy, rho_cell[ci])
+            if self._beam_kernels is not None:
+                # Secondary peaks get their elevation in _resolve_peaks once their cell's
+                # strongest source is known (most are its sidelobes and need none): NaN here.
+                lead = np.r_[True, ci[1:] != ci[:-1]] if ci.size else np.zeros(0, dtype=bool)
+                uz, peak = np.full(ci.size, np.nan), np.zeros(ci.size)
+                uz[lead], peak[lead] = self._elevation_search(vectors[ci[lead]], uy[lead],
+                                                              rho_cell[ci[lead]])
+            else:
+                uz, peak = self._elevation_search(vectors[ci], uy, rho_cell[ci])
         else:
             if spec is None:
                 g = self.detection_grid
@@ -953,6 +961,10 @@ class RadarProcessor:
         if refine and primary.any():
             uy[primary], uz[primary], peak[primary] = newton(x[primary], uy[primary],
                                                              uz[primary], rho[primary])
+        deferred = np.isnan(uz)              # secondary peaks without their elevation yet
+        if deferred.any():
+            uy, uz, peak, ci, x, rho, primary = self._screen_secondaries(
+                x, ci, uy, uz, peak, rho, floor, primary, deferred)
         w = self._steer(uy, uz, rho)                                    # (M, P)
         if primary.all():
             return uy, uz, peak, w, ci
@@ -1033,6 +1045,32 @@ class RadarProcessor:
                 (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
             w = np.concatenate([lone[3], w], axis=1)[:, order]
         return uy, uz, peak, w, ci
+
+    def _screen_secondaries(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray,
+                            uz: np.ndarray, peak: np.ndarray, rho: np.ndarray,
+                            floor: np.ndarray, primary: np.ndarray, deferred: np.ndarray
+                            ) -> tuple[np.ndarray, ...]:
+        """Drop the secondary peaks that the residual test below rejects at every elevation
+        (compiled path): its residual beam power is at most ``(Σ_q |A_q| / M)²``, ``A_q`` the
+        residual's azimuth-steered sum over elevation row ``q``
+        (:func:`~coloradar.dsp._kernels.secondary_bound`); the others get their elevation
+        search now. Returns ``uy, uz, peak, ci, x, rho, primary`` of the peaks kept."""
+        kb = self._beam_kernels
+        assert kb is not None
+        lead = np.cumsum(primary) - 1                   # each peak's primary, among primaries
+        wp = self._steer(uy[primary], uz[primary], rho[primary])
+        bound, top = np.empty((2, ci.size))
+        kb["k"].secondary_bound(_c64(x), wp, lead.astype(np.int64), _f64(uy), kb["ca"], kb["az"],
+                                kb["row"], int(kb["row"].max()) + 1, bound, top)
+        hopeless = deferred & ((bound < floor[ci]) | (bound < top * self._angle_dynamic))
+        keep = ~hopeless
+        uy, uz, peak, ci, x, rho, primary, deferred = (
+            uy[keep], uz[keep], peak[keep], ci[keep], x[keep], rho[keep], primary[keep],
+            deferred[keep])
+        if deferred.any():
+            uz[deferred], peak[deferred] = self._elevation_search(x[deferred], uy[deferred],
+                                                                  rho[deferred])
+        return uy, uz, peak, ci, x, rho, primary
 
     def _residual_floor(self, x: np.ndarray, w: np.ndarray, amps: np.ndarray,
                         cell_of: np.ndarray, starts: np.ndarray) -> np.ndarray:
