@@ -26,7 +26,7 @@ import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
            "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "prepare_chirps", "secondary_bound", "secondary_residual", "steer_columns"]
+           "power", "prepare_chirps", "secondary_bound", "secondary_residual", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -838,11 +838,22 @@ def secondary_bound(x: Any, w_first: Any, first: Any, uy: Any, ca: float, az_pos
         b /= m_n
         out_bound[p] = b * b
 
+
+@_jit(nogil=True, fastmath=_FM)
+def power(values: Any, out: Any) -> None:  # pragma: no cover - compiled
+    """``out[i] = re² + im²`` of complex values given as interleaved float32 ``(2N,)``;
+    ``out`` float32 ``(N,)`` (``|·|²`` without numpy's ``hypot`` and a second pass)."""
+    for i in range(out.size):
+        a = values[2 * i]
+        b = values[2 * i + 1]
+        out[i] = a * a + b * b
+
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
 peak_over_doppler_planar = _Announced(peak_over_doppler_planar)
 prepare_chirps = _Announced(prepare_chirps)
+power = _Announced(power)
 beam_neighbourhood = _Announced(beam_neighbourhood)
 elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)

@@ -707,8 +707,13 @@ class RadarProcessor:
         noise powers (float64 ``(tx·rx,)``; None without whitening)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
-        mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
-        np.square(mag2, out=mag2)
+        if self._beam_kernels is not None:
+            mag2 = np.empty((ntx * nrx, nd * nr), dtype=np.float32)
+            self._beam_kernels["k"].power(_c64(rd).reshape(-1).view(np.float32),
+                                          mag2.reshape(-1))
+        else:
+            mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
+            np.square(mag2, out=mag2)
         plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
             return plain.reshape(nd, nr).astype(np.float64), plain, self._looks, None
