@@ -966,10 +966,11 @@ class RadarProcessor:
         if refine and primary.any():
             uy[primary], uz[primary], peak[primary] = newton(x[primary], uy[primary],
                                                              uz[primary], rho[primary])
-        deferred = np.isnan(uz)              # secondary peaks without their elevation yet
-        if deferred.any():
-            uy, uz, peak, ci, x, rho, primary = self._screen_secondaries(
-                x, ci, uy, uz, peak, rho, floor, primary, deferred)
+        if self._beam_kernels is not None:
+            deferred = np.isnan(uz) & ~primary     # secondaries without their elevation yet
+            if deferred.any():
+                uy, uz, peak, ci, x, rho, primary = self._screen_secondaries(
+                    x, ci, uy, uz, peak, rho, floor, primary, deferred)
         w = self._steer(uy, uz, rho)                                    # (M, P)
         if primary.all():
             return uy, uz, peak, w, ci
