@@ -312,6 +312,8 @@ def main() -> None:
         print(f"  baseline / numpy-engine heatmap {base / t['ADC -> heatmap, numpy engine']:6.2f}x")
         print(f"  point cloud / baseline heatmap  {t['ADC -> point cloud'] / base:6.1%}   "
               f"(goal <= 15 %)")
+        print(f"  point cloud / heatmap           {t['ADC -> point cloud'] / hm:6.2f}x   "
+              f"(goal <= 1)")
         if args.only == "all":
             detection_costs(calib, fr, args.repeat)
 

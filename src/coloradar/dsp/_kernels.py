@@ -15,6 +15,7 @@ silent pause.
 
 from __future__ import annotations
 
+import math
 import sys
 import warnings
 from collections.abc import Callable
@@ -23,8 +24,9 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["CACHE_PROBLEM", "LANES", "gather_rows", "peak_over_doppler",
-           "peak_over_doppler_planar", "prepare_chirps"]
+__all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
+           "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
+           "power", "prepare_chirps", "secondary_bound", "secondary_residual", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -512,8 +514,350 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
                     out[k, c, 2 * n] = vr * gr - vi * gi
                     out[k, c, 2 * n + 1] = vr * gi + vi * gr
 
+
+# ------------------------------------------------------------------ per-detection kernels
+# Beams of single detections at arbitrary direction sines (coloradar.dsp.processor's
+# detection stages). Element m sits at integer grid positions (az_pos[m], el_pos[m]), so its
+# steering factor exp(j(ca·az_pos·u_y + cb·el_pos·u_z)) is a product of two powers of one
+# phasor per axis: a few complex multiplications per position instead of a sine and a cosine
+# per element (float64 throughout; the numpy path rounds the phases to float32, ~3e-5 rad).
+
+
+@numba.njit(inline="always")
+def _powers(c: float, u: float, out: Any) -> None:  # pragma: no cover - compiled
+    # out[k] = exp(j·c·u·k), k = 0 … len − 1: the first 8 by repeated multiplication, then
+    # each from the one 8 before (independent products that pipeline; error ~k·1e-16)
+    e = complex(math.cos(c * u), math.sin(c * u))
+    n = out.size
+    v = 1.0 + 0.0j
+    for k in range(min(n, 8)):
+        out[k] = v
+        v *= e
+    for k in range(8, n):                           # v = e⁸ here
+        out[k] = out[k - 8] * v
+
+
+@_jit(nogil=True)
+def steer_columns(ca: float, cb: float, az_pos: Any, el_pos: Any, uy: Any, uz: Any,
+                  out: Any) -> None:  # pragma: no cover - compiled
+    """``out[m, p] = exp(j(ca·az_pos[m]·uy[p] + cb·el_pos[m]·uz[p]))``, complex64 ``(M, P)``
+    (:func:`coloradar.dsp.angle.steering` with ``ca = πρ·s_az``, ``cb = πρ·s_el``)."""
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    pe = np.empty(np.max(el_pos) + 1, np.complex128)
+    for p in range(uy.size):
+        _powers(ca, uy[p], pa)
+        _powers(cb, uz[p], pe)
+        for m in range(az_pos.size):
+            out[m, p] = pa[az_pos[m]] * pe[el_pos[m]]
+
+
+@numba.njit(inline="always")
+def _beam(x: Any, az_pos: Any, el_pos: Any, pa: Any, pe: Any) -> complex:  # pragma: no cover
+    acc = 0.0 + 0.0j
+    for m in range(az_pos.size):
+        acc += x[m] * (pa[az_pos[m]] * pe[el_pos[m]])
+    return acc
+
+
+@_jit(nogil=True)
+def newton_refine(x: Any, ca: float, cb: float, az_pos: Any, el_pos: Any, uy: Any, uz: Any,
+                  max_step_y: float, max_step_z: float, iterations: int, elevation: bool,
+                  out_uy: Any, out_uz: Any, out_power: Any) -> None:  # pragma: no cover
+    """:func:`coloradar.dsp.angle.newton_refine` of vectors ``x`` complex64 ``(K, M)``: each
+    step's beam, gradient and Hessian in one pass over the elements; writes the refined sines
+    and ``|B|²/M²`` (float64 ``(K,)``)."""
+    k_n, m_n = x.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    pe = np.empty(np.max(el_pos) + 1, np.complex128)
+    for k in range(k_n):
+        y, z = uy[k], uz[k]
+        xk = x[k]
+        _powers(ca, y, pa)
+        _powers(cb, z, pe)
+        b0 = _beam(xk, az_pos, el_pos, pa, pe)
+        p0 = b0.real * b0.real + b0.imag * b0.imag
+        for _ in range(iterations):
+            bv = sa = sb = saa = sbb = sab = 0.0 + 0.0j
+            for m in range(m_n):
+                v = xk[m] * (pa[az_pos[m]] * pe[el_pos[m]])
+                a = ca * az_pos[m]
+                b = cb * el_pos[m]
+                bv += v
+                sa += v * a
+                sb += v * b
+                saa += v * (a * a)
+                sbb += v * (b * b)
+                sab += v * (a * b)
+            by, bz = 1j * sa, 1j * sb                 # dB/du_y, dB/du_z
+            cbv = bv.conjugate()
+            gy = 2.0 * (cbv * by).real
+            gz = 2.0 * (cbv * bz).real
+            hyy = 2.0 * (abs(by) ** 2 - (cbv * saa).real)
+            hzz = 2.0 * (abs(bz) ** 2 - (cbv * sbb).real)
+            hyz = 2.0 * ((by.conjugate() * bz).real - (cbv * sab).real)
+            sy = sz = 0.0
+            if elevation:
+                det = hyy * hzz - hyz * hyz
+                if hyy < 0 and det > 0:
+                    sy = -(hzz * gy - hyz * gz) / det
+                    sz = -(hyy * gz - hyz * gy) / det
+            elif hyy < 0:
+                sy = -gy / hyy
+            sy = min(max(sy, -max_step_y), max_step_y)
+            sz = min(max(sz, -max_step_z), max_step_z)
+            _powers(ca, y + sy, pa)
+            _powers(cb, z + sz, pe)
+            b1 = _beam(xk, az_pos, el_pos, pa, pe)
+            p1 = b1.real * b1.real + b1.imag * b1.imag
+            if p1 > p0:
+                y, z, p0 = y + sy, z + sz, p1
+            else:                                     # phasors of the point kept
+                _powers(ca, y, pa)
+                _powers(cb, z, pe)
+        out_uy[k], out_uz[k] = y, z
+        out_power[k] = p0 / (m_n * m_n)
+
+
+@numba.njit(inline="always")
+def _log_parabola(v0: float, v1: float, v2: float) -> float:  # pragma: no cover - compiled
+    # coloradar.dsp.angle.refine_peak's offset (circular axis)
+    l0 = math.log(max(v0, 1e-300))
+    l1 = math.log(max(v1, 1e-300))
+    l2 = math.log(max(v2, 1e-300))
+    den = l0 - 2.0 * l1 + l2
+    if not den < 0:
+        return 0.0
+    return min(max(0.5 * (l0 - l2) / den, -0.5), 0.5)
+
+
+@_jit(nogil=True)
+def elevation_search(x: Any, ca: float, az_pos: Any, row: Any, row_steer: Any, el_sines: Any,
+                     uy: Any, rho: float, out_uz: Any, out_power: Any) -> None:  # pragma: no cover
+    """Strongest elevation beam of each vector ``x`` complex64 ``(P, M)`` along its azimuth
+    ``uy``: elements steered in azimuth and summed per elevation row (``row[m]``), the rows
+    beamformed with ``row_steer`` complex64 ``(rows, n_el)`` over the grid's elevation sines
+    (invisible directions give 0), the first maximum refined by a log-parabola (circular);
+    writes its sine (``rho`` the grid's element spacing in half wavelengths) and
+    ``|B|²/M²``."""
+    p_n, m_n = x.shape
+    n_rows, ne = row_steer.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    acc = np.empty(n_rows, np.complex128)
+    order = np.argsort(row, kind="mergesort")      # elements grouped by row
+    row_start = np.zeros(n_rows + 1, np.int64)
+    for m in range(m_n):
+        row_start[row[m] + 1] += 1
+    for q in range(n_rows):
+        row_start[q + 1] += row_start[q]
+    sr = np.empty((n_rows, ne))
+    si = np.empty((n_rows, ne))
+    for q in range(n_rows):
+        for e in range(ne):
+            sr[q, e] = row_steer[q, e].real
+            si[q, e] = row_steer[q, e].imag
+    s2 = el_sines * el_sines
+    vr = np.empty(ne)
+    vi = np.empty(ne)
+    bz = np.empty(ne)
+    for p in range(p_n):
+        _powers(ca, uy[p], pa)
+        for q in range(n_rows):                  # each row's elements in turn
+            a = 0.0 + 0.0j
+            for i in range(row_start[q], row_start[q + 1]):
+                m = order[i]
+                a += x[p, m] * pa[az_pos[m]]
+            acc[q] = a
+        vr[:] = 0.0
+        vi[:] = 0.0
+        for q in range(n_rows):                  # elevation bins innermost (vectorised)
+            ar, ai = acc[q].real, acc[q].imag
+            for e in range(ne):
+                vr[e] += ar * sr[q, e] - ai * si[q, e]
+                vi[e] += ar * si[q, e] + ai * sr[q, e]
+        lim = 1.0 - uy[p] * uy[p]
+        for e in range(ne):
+            bz[e] = vr[e] * vr[e] + vi[e] * vi[e] if s2[e] <= lim else 0.0
+        ie = 0
+        for e in range(1, ne):
+            if bz[e] > bz[ie]:
+                ie = e
+        fe = ie + _log_parabola(bz[(ie - 1) % ne], bz[ie], bz[(ie + 1) % ne])
+        out_uz[p] = 2.0 * (fe - ne // 2) / (ne * rho)
+        out_power[p] = bz[ie] / (m_n * m_n)
+
+
+@_jit(nogil=True)
+def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d: Any, r: Any,
+                       alias: Any, tdm: bool, steer: Any, out: Any) -> None:  # pragma: no cover
+    """Beam power ``|Σ_m v_m·steer[m, p]|²/M²`` of each point's direction in the 3 × 3 cells
+    around its range–Doppler cell (``out`` float64 ``(P, 3, 3)``, Doppler then range offset
+    −1..1). ``rd`` complex64 ``(channels, doppler, range)`` without TDM phases (Doppler index
+    ``i`` ↔ signed bin ``i − doppler//2``), element ``m`` read from channel ``chan[m]`` of TX
+    slot ``tx_of[m]``; ``nxt`` ``(channels, doppler)`` the range bin after the last (or
+    ``(0, 0)``). With ``tdm`` each cell gets the TDM phase of its Doppler bin (a neighbour
+    across the edge: of the unwrapped bin), every cell the point's alias phase."""
+    _, nd, nr = rd.shape
+    m_n = chan.size
+    m2 = float(m_n * m_n)
+    ph = np.empty((3, num_tx), np.complex128)
+    acc = np.empty((3, 3), np.complex128)
+    dn = np.empty(3, np.int64)
+    rn = np.empty(3, np.int64)
+    for p in range(d.size):
+        for i in range(3):
+            dd = d[p] + i - 1
+            dn[i] = dd % nd
+            rn[i] = min(max(r[p] + i - 1, 0), nr - 1)
+            for t in range(num_tx):
+                ang = -2.0 * math.pi * t * alias[p] / num_tx
+                if tdm:                                   # at the unwrapped bin
+                    ang -= 2.0 * math.pi * t * (dd - nd // 2) / (nd * num_tx)
+                ph[i, t] = complex(math.cos(ang), math.sin(ang))
+        beyond = nxt.shape[0] > 0 and r[p] + 1 >= nr
+        acc[:] = 0.0
+        # element-major: each element's 3 × 3 cells lie in 3 short rows of its channel
+        for m in range(m_n):
+            c, t = chan[m], tx_of[m]
+            s = complex(steer[m, p])
+            for i in range(3):
+                f = ph[i, t] * s
+                di = dn[i]
+                acc[i, 0] += rd[c, di, rn[0]] * f
+                acc[i, 1] += rd[c, di, rn[1]] * f
+                acc[i, 2] += (nxt[c, di] if beyond else rd[c, di, rn[2]]) * f
+        for i in range(3):
+            for k in range(3):
+                v = acc[i, k]
+                out[p, i, k] = (v.real * v.real + v.imag * v.imag) / m2
+
+
+@_jit(nogil=True)
+def joint_amplitudes(x: Any, w: Any, starts: Any, out: Any) -> None:  # pragma: no cover
+    """Least-squares amplitudes of every cell's sources: the peaks ``starts[c] …
+    starts[c + 1] − 1`` belong to cell ``c`` (``starts`` ends with P), whose vector is
+    ``x[starts[c]]`` (complex64 ``(P, M)``, one row per peak) and whose sources are the
+    columns ``conj(w[:, p])`` (complex64 ``(M, P)``). A lone source gets its beam value
+    ``Σ_m x_m w_m / M``; several are solved jointly (normal equations, Gaussian elimination
+    with partial pivoting). Writes complex128 ``out`` ``(P,)``."""
+    m_n = x.shape[1]
+    for c in range(starts.size - 1):
+        s0, n = starts[c], starts[c + 1] - starts[c]
+        if n == 1:
+            acc = 0.0 + 0.0j
+            for m in range(m_n):
+                acc += x[s0, m] * w[m, s0]
+            out[s0] = acc / m_n
+            continue
+        g = np.zeros((n, n + 1), np.complex128)          # [Gram | right-hand side]
+        for i in range(n):
+            for m in range(m_n):
+                wi = complex(w[m, s0 + i])
+                g[i, n] += wi * x[s0, m]
+                for j in range(i, n):
+                    g[i, j] += wi * complex(w[m, s0 + j]).conjugate()
+            for j in range(i):
+                g[i, j] = g[j, i].conjugate()
+        for col in range(n):
+            piv = col
+            for i in range(col + 1, n):
+                if abs(g[i, col]) > abs(g[piv, col]):
+                    piv = i
+            if piv != col:
+                for j in range(n + 1):
+                    g[col, j], g[piv, j] = g[piv, j], g[col, j]
+            for i in range(col + 1, n):
+                f = g[i, col] / g[col, col]
+                for j in range(col, n + 1):
+                    g[i, j] -= f * g[col, j]
+        for i in range(n - 1, -1, -1):
+            v = g[i, n]
+            for j in range(i + 1, n):
+                v -= g[i, j] * out[s0 + j]
+            out[s0 + i] = v / g[i, i]
+
+
+@_jit(nogil=True)
+def secondary_residual(x: Any, w: Any, first: Any, resid: Any, top: Any) -> None:  # pragma: no cover
+    """For every peak ``p`` of a cell whose strongest peak is ``first[p]``: the beam of the
+    cell's vector less the strongest source's fit, ``|s_p − s_f·c_fp|²`` with ``s`` the beam
+    values ``Σ_m x_m w_m / M`` and ``c_fp = Σ_m conj(w_mf) w_mp / M`` the array's cross
+    pattern (``resid``), and ``|s_f|²`` (``top``); float64 ``(P,)``. ``x`` complex64 ``(P, M)``,
+    ``w`` complex64 ``(M, P)``."""
+    p_n, m_n = x.shape
+    amp = np.empty(p_n, np.complex128)
+    for p in range(p_n):
+        acc = 0.0 + 0.0j
+        for m in range(m_n):
+            acc += x[p, m] * w[m, p]
+        amp[p] = acc / m_n
+    for p in range(p_n):
+        f = first[p]
+        a = amp[f]
+        top[p] = a.real * a.real + a.imag * a.imag
+        if f == p:
+            resid[p] = top[p]
+            continue
+        c = 0.0 + 0.0j
+        for m in range(m_n):
+            c += complex(w[m, f]).conjugate() * w[m, p]
+        v = amp[p] - a * (c / m_n)
+        resid[p] = v.real * v.real + v.imag * v.imag
+
+
+@_jit(nogil=True)
+def secondary_bound(x: Any, w_first: Any, first: Any, uy: Any, ca: float, az_pos: Any,
+                    row: Any, n_rows: int, out_bound: Any, out_top: Any) -> None:  # pragma: no cover
+    """Upper bound, over every elevation, of the residual beam power of secondary peaks.
+
+    Peak ``p`` (vector ``x[p]`` complex64 ``(P, M)``, azimuth sine ``uy[p]``) belongs to a
+    cell whose strongest source has weights ``w_first[:, first[p]]`` (complex64
+    ``(M, F)``) and beam value ``s_f = Σ_m x_m w_m / M``; the cell's vector less that source's
+    fit, ``r = x − s_f·conj(w_f)``, steered in azimuth and summed per elevation row
+    (``row[m]``, ``n_rows`` rows) gives ``A_q``, and ``|Σ_m r_m w_m(u)|/M ≤ Σ_q |A_q| / M``
+    whatever the elevation of ``u`` (each row's elevation phase has modulus 1). Writes that
+    bound squared (``out_bound``) and ``|s_f|²`` (``out_top``), float64 ``(P,)``.
+    """
+    p_n, m_n = x.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    acc = np.empty(n_rows, np.complex128)
+    for p in range(p_n):
+        f = first[p]
+        a = 0.0 + 0.0j
+        for m in range(m_n):
+            a += x[p, m] * w_first[m, f]
+        a /= m_n
+        out_top[p] = a.real * a.real + a.imag * a.imag
+        _powers(ca, uy[p], pa)
+        acc[:] = 0.0
+        for m in range(m_n):
+            r = x[p, m] - a * complex(w_first[m, f]).conjugate()
+            acc[row[m]] += r * pa[az_pos[m]]
+        b = 0.0
+        for q in range(n_rows):
+            b += abs(acc[q])
+        b /= m_n
+        out_bound[p] = b * b
+
+
+@_jit(nogil=True, fastmath=_FM)
+def power(values: Any, out: Any) -> None:  # pragma: no cover - compiled
+    """``out[i] = re² + im²`` of complex values given as interleaved float32 ``(2N,)``;
+    ``out`` float32 ``(N,)`` (``|·|²`` without numpy's ``hypot`` and a second pass)."""
+    for i in range(out.size):
+        a = values[2 * i]
+        b = values[2 * i + 1]
+        out[i] = a * a + b * b
+
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
 peak_over_doppler_planar = _Announced(peak_over_doppler_planar)
 prepare_chirps = _Announced(prepare_chirps)
+power = _Announced(power)
+beam_neighbourhood = _Announced(beam_neighbourhood)
+elevation_search = _Announced(elevation_search)
+joint_amplitudes = _Announced(joint_amplitudes)
+newton_refine = _Announced(newton_refine)
+secondary_bound = _Announced(secondary_bound)
+secondary_residual = _Announced(secondary_residual)
+steer_columns = _Announced(steer_columns)

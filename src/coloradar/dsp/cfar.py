@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from math import comb
+from math import comb, prod
 from typing import Literal, get_args
 
 import numpy as np
@@ -94,10 +94,10 @@ def cfar_window(guard: tuple[int, ...], train: tuple[int, ...], split_axis: int 
     """Training cells ``N`` in total and ``n`` in each GO/SO half for a window geometry."""
     ax = split_axis % len(guard)
     h = [g + t for g, t in zip(guard, train, strict=True)]
-    outer = int(np.prod([2 * x + 1 for x in h]))
-    inner = int(np.prod([2 * g + 1 for g in guard]))
-    half_outer = int(np.prod([2 * x + 1 for i, x in enumerate(h) if i != ax])) * h[ax]
-    half_inner = int(np.prod([2 * g + 1 for i, g in enumerate(guard) if i != ax])) * guard[ax]
+    outer = prod(2 * x + 1 for x in h)
+    inner = prod(2 * g + 1 for g in guard)
+    half_outer = prod(2 * x + 1 for i, x in enumerate(h) if i != ax) * h[ax]
+    half_inner = prod(2 * g + 1 for i, g in enumerate(guard) if i != ax) * guard[ax]
     return outer - inner, half_outer - half_inner
 
 
@@ -386,22 +386,27 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
             return CFARResult(power > res.threshold, res.threshold, res.noise, res.scale)
         return first
     alpha: float | np.ndarray
+    count: float | np.ndarray
     if kind == "ca":
-        count = _ring_sum(np.ones_like(x), g, h, modes) if truncate else float(n_all)
+        if truncate:
+            count = _truncated_counts(x.shape, g, h, modes, 0, 0)
+            alpha = _truncated_alpha(kind, x.shape, g, h, modes, 0, cell_factor, pfa, looks)
+        else:
+            count = float(n_all)
+            alpha = _alpha_for(kind, count, cell_factor, pfa, 0, looks)
         noise = _ring_sum(x, g, h, modes) / count
-        alpha = _alpha_for(kind, count, cell_factor, pfa, 0, looks)
     elif kind in ("go", "so"):
         if n_half < 1:
             raise SettingsError("GO/SO-CFAR needs training cells on both sides of split_axis")
         ax = split_axis % nd
-        ones = np.ones_like(x)
-        c_lead = _ring_sum(ones, g, h, modes, -1, ax) if truncate else float(n_half)
-        c_lag = _ring_sum(ones, g, h, modes, 1, ax) if truncate else float(n_half)
+        c_lead = _truncated_counts(x.shape, g, h, modes, -1, ax) if truncate else float(n_half)
+        c_lag = _truncated_counts(x.shape, g, h, modes, 1, ax) if truncate else float(n_half)
         lead = _ring_sum(x, g, h, modes, -1, ax) / np.maximum(c_lead, 1.0)
         lag = _ring_sum(x, g, h, modes, 1, ax) / np.maximum(c_lag, 1.0)
         noise = np.maximum(lead, lag) if kind == "go" else np.minimum(lead, lag)
         # Unequal halves at an edge: the threshold of the smaller one (conservative for GO).
-        alpha = _alpha_for(kind, np.minimum(c_lead, c_lag), cell_factor, pfa, 0, looks)
+        alpha = (_truncated_alpha(kind, x.shape, g, h, modes, ax, cell_factor, pfa, looks)
+                 if truncate else _alpha_for(kind, float(n_half), cell_factor, pfa, 0, looks))
     elif kind == "os":
         k = _os_rank(rank, n_all)
         fp = np.ones([2 * v + 1 for v in h], dtype=bool)
@@ -420,6 +425,32 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
         raise SettingsError(f"unknown CFAR kind {kind!r}; expected one of {', '.join(CFAR_KINDS)}")
     threshold = alpha * noise
     return CFARResult(x > threshold, threshold, noise, alpha)
+
+
+@lru_cache(maxsize=64)
+def _truncated_counts(shape: tuple[int, ...], g: tuple[int, ...], h: tuple[int, ...],
+                      modes: tuple[CFAREdge, ...], side: int, axis: int) -> np.ndarray:
+    """Training cells of every cell of a map of ``shape`` with truncated edges (as
+    :func:`_ring_sum` of ones; read-only, cached: every frame of a radar has the same map)."""
+    out = _ring_sum(np.ones(shape), g, h, modes, side, axis)
+    out.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=64)
+def _truncated_alpha(kind: str, shape: tuple[int, ...], g: tuple[int, ...], h: tuple[int, ...],
+                     modes: tuple[CFAREdge, ...], axis: int, factor: float, pfa: float,
+                     looks: float) -> np.ndarray:
+    """Per-cell ``α`` of a CA (GO/SO: the smaller half along ``axis``) CFAR with truncated
+    edges (read-only, cached)."""
+    if kind == "ca":
+        count = _truncated_counts(shape, g, h, modes, 0, 0)
+    else:
+        count = np.minimum(_truncated_counts(shape, g, h, modes, -1, axis),
+                           _truncated_counts(shape, g, h, modes, 1, axis))
+    out = np.asarray(_alpha_for(kind, count, factor, pfa, 0, looks))
+    out.setflags(write=False)
+    return out
 
 
 def _alpha_for(kind: str, count: float | np.ndarray, factor: float, pfa: float, rank: int,

@@ -10,6 +10,7 @@ boresight, y left, z up). From a range–Doppler detection at range ``R`` and di
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.ndimage import maximum_filter
@@ -111,18 +112,38 @@ def channel_noise(power: np.ndarray, first_range: int = 0,
     numpy.ndarray
         float64 ``(channels,)``.
     """
-    c = power.shape[0]
-    cells = power[:, :, first_range:].reshape(c, -1)
-    if cells.shape[1] == 0:
-        cells = power.reshape(c, -1)
-    step = -(-cells.shape[1] // max(int(max_cells), 1))
+    c, nd, nr = power.shape
+    if first_range >= nr:
+        first_range = 0
+    n = nd * (nr - first_range)
+    step = -(-n // max(int(max_cells), 1))
     if step > 1:
         # Every k-th cell of the flattened (Doppler, range) grid spreads over both axes; k odd
         # so that an even range length does not keep the same parity of range bins throughout.
-        cells = cells[:, :: step | 1]
+        # (Gathered straight from the map: no copy of the whole map first.)
+        flat = power.reshape(c, nd * nr)
+        cells = np.take(flat, _noise_cells(nd, nr, first_range, step | 1), axis=1)
+    else:
+        cells = power[:, :, first_range:].reshape(c, -1)
     mid = cells.shape[1] // 2
-    med = np.partition(cells, mid, axis=1)[:, mid].astype(np.float64)
+    if cells.dtype == np.float32 and np.all(cells >= 0):
+        # Non-negative float32 values order as their bit patterns read as int32, and numpy
+        # selects among integers faster (a fifth less time): the same cell is chosen.
+        bits = np.ascontiguousarray(cells).view(np.int32)
+        med = np.partition(bits, mid, axis=1)[:, mid].view(np.float32).astype(np.float64)
+    else:
+        med = np.partition(cells, mid, axis=1)[:, mid].astype(np.float64)
     return np.maximum(med / np.log(2.0), np.finfo(np.float64).tiny)
+
+
+@lru_cache(maxsize=16)
+def _noise_cells(nd: int, nr: int, first_range: int, step: int) -> np.ndarray:
+    """Flat indices into a ``(nd, nr)`` map of every ``step``-th cell of its range bins from
+    ``first_range`` on, the grid flattened Doppler-major (read-only, cached)."""
+    d_idx, r_idx = np.divmod(np.arange(0, nd * (nr - first_range), step), nr - first_range)
+    out = d_idx * nr + first_range + r_idx
+    out.setflags(write=False)
+    return out
 
 
 def sidelobe_envelope(window: np.ndarray, fft_size: int, num_lags: int,

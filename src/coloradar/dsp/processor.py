@@ -391,6 +391,7 @@ class RadarProcessor:
         self._tdm = None
         if s.tdm_compensation:
             self._tdm = tdm_phase(ntx, signed_doppler_bins(nd), nd)[:, None, :, None]
+            self._tdm_table = np.ascontiguousarray(self._tdm[:, 0, :, 0])         # (tx, doppler)
 
         self.grid = angle_grid(calib.antenna, w.center_frequency, hm.num_elevation_bins,
                                hm.num_azimuth_bins, s.azimuth_sign, s.elevation_sign)
@@ -476,6 +477,28 @@ class RadarProcessor:
         # The last processed range bin: a tone within half a bin of it gives at most this
         # power ratio to the bin before (window main lobe); beyond it, more.
         self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
+        self._beam_kernels = self._init_beam_kernels()
+
+    def _init_beam_kernels(self) -> dict[str, Any] | None:
+        """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
+        used with the numba engine for far-field beams (near-field focusing stays numpy)."""
+        s, dg = self.settings, self.detection_grid
+        if self._engine != "numba" or s.near_field:
+            return None
+        from . import _kernels
+        nrx = self.calib.frame_shape[1]
+        first = self.calib.antenna.virtual.first_pair
+        _, row = np.unique(dg.el_pos, return_inverse=True)
+        return {"k": _kernels,
+                "ca": float(np.pi * dg.rho * dg.azimuth_sign),
+                "cb": float(np.pi * dg.rho * dg.elevation_sign),
+                "az": np.ascontiguousarray(dg.az_pos, dtype=np.int64),
+                "el": np.ascontiguousarray(dg.el_pos, dtype=np.int64),
+                "row": np.ascontiguousarray(row, dtype=np.int64),
+                "row_steer": np.ascontiguousarray(self._row_steer),
+                "el_sines": np.ascontiguousarray(dg.el_sines, dtype=np.float64),
+                "chan": np.ascontiguousarray(first[:, 0] * nrx + first[:, 1], dtype=np.int64),
+                "tx": np.ascontiguousarray(first[:, 0], dtype=np.int64)}
 
     # ------------------------------------------------------------------ cubes
     def _check(self, adc: np.ndarray) -> np.ndarray:
@@ -525,13 +548,20 @@ class RadarProcessor:
         out = out[..., :keep]
         return out.reshape(ntx, nrx, nc, -1) if channels is None else out
 
-    def _doppler(self, rcube: np.ndarray) -> np.ndarray:
+    def _doppler(self, rcube: np.ndarray, compensate: bool = True) -> np.ndarray:
+        """Doppler FFT of a range cube; ``compensate=False`` leaves out the TDM phases
+        (detection applies them to the few cells it reads, :meth:`_tdm_at`)."""
         v = sfft.fft(rcube, n=self.doppler_fft_size, axis=2, workers=self.settings.workers)
         if self.doppler_fft_size % 2:
             v = sfft.fftshift(v, axes=2)
-        if self._tdm is not None:
+        if compensate and self._tdm is not None:
             v *= self._tdm
         return v
+
+    def _tdm_at(self, d: np.ndarray) -> np.ndarray | None:
+        """Bin-centre TDM phases of Doppler bins ``d``, complex64 ``(tx, 1, K)`` (the factors
+        :meth:`_doppler` multiplies the cube by), or None without TDM compensation."""
+        return None if self._tdm is None else self._tdm_table[:, d][:, None, :]
 
     def range_doppler(self, adc: np.ndarray) -> np.ndarray:
         """Calibrated, TDM-compensated range–Doppler cube.
@@ -667,8 +697,8 @@ class RadarProcessor:
         """
         rcube = self._range_cube(adc, extra=True)
         nr = self.num_range_bins
-        return self._detect(rcube[..., :nr], self._doppler(rcube[..., :nr]),
-                            self._doppler(rcube[..., nr:]))
+        return self._detect(rcube[..., :nr], self._doppler(rcube[..., :nr], compensate=False),
+                            self._doppler(rcube[..., nr:], compensate=False))
 
     def _detection_map(self, rd: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
@@ -677,8 +707,13 @@ class RadarProcessor:
         noise powers (float64 ``(tx·rx,)``; None without whitening)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
-        mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
-        np.square(mag2, out=mag2)
+        if self._beam_kernels is not None:
+            mag2 = np.empty((ntx * nrx, nd * nr), dtype=np.float32)
+            self._beam_kernels["k"].power(_c64(rd).reshape(-1).view(np.float32),
+                                          mag2.reshape(-1))
+        else:
+            mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
+            np.square(mag2, out=mag2)
         plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
             return plain.reshape(nd, nr).astype(np.float64), plain, self._looks, None
@@ -726,9 +761,11 @@ class RadarProcessor:
 
     def _detect(self, rcube: np.ndarray, rd: np.ndarray, rd_next: np.ndarray | None = None
                 ) -> Detections:
-        """Detections of a range–Doppler cube; ``rd_next`` (tx, rx, doppler, 1 or 0): the range
-        bin after the last one, when computed (a return beyond the processed range then makes
-        no local maximum at the last bin)."""
+        """Detections of a range–Doppler cube ``rd`` *without* its TDM phases
+        (``_doppler(…, compensate=False)``: the power map does not need them, and the cells
+        read get them from :meth:`_tdm_at`); ``rd_next`` (tx, rx, doppler, 1 or 0), the same
+        for the range bin after the last one, when computed (a return beyond the processed
+        range then makes no local maximum at the last bin)."""
         s = self.settings
         stat, plain, looks, sig2 = self._detection_map(rd)
         nxt = None
@@ -770,7 +807,8 @@ class RadarProcessor:
         ntx = rd.shape[0]
         vecs = rd[:, :, d, r]                                           # (tx, rx, K)
         if self._tdm is not None:
-            # rd holds bin-centre compensation; add the fractional remainder.
+            # bin-centre compensation, then the fractional remainder
+            vecs = vecs * self._tdm_at(d)
             vecs = vecs * tdm_phase(ntx, d_ref - d, nd)[:, None, :]
         alias, spec = self._choose_alias(vecs, k_signed)
         if alias is not None:
@@ -803,7 +841,15 @@ class RadarProcessor:
             fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
                                        prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
             uy = 2.0 * (fa - na // 2) / (na * self.detection_grid.rho)
-            uz, peak = self._elevation_search(vectors[ci], uy, rho_cell[ci])
+            if self._beam_kernels is not None:
+                # Secondary peaks get their elevation in _resolve_peaks once their cell's
+                # strongest source is known (most are its sidelobes and need none): NaN here.
+                lead = np.r_[True, ci[1:] != ci[:-1]] if ci.size else np.zeros(0, dtype=bool)
+                uz, peak = np.full(ci.size, np.nan), np.zeros(ci.size)
+                uz[lead], peak[lead] = self._elevation_search(vectors[ci[lead]], uy[lead],
+                                                              rho_cell[ci[lead]])
+            else:
+                uz, peak = self._elevation_search(vectors[ci], uy, rho_cell[ci])
         else:
             if spec is None:
                 g = self.detection_grid
@@ -866,6 +912,11 @@ class RadarProcessor:
         """Beam weights ``(M, P)`` complex64 at direction sines ``(u_y, u_z)``, focused at range
         ``rho`` from the phase centre: ``B(u) = Σ_m x_m w_m / M`` is ``s`` for a source
         ``s`` at ``(rho, u)``."""
+        kb = self._beam_kernels
+        if kb is not None:
+            w = np.empty((self.detection_grid.num_elements, np.size(uy)), dtype=np.complex64)
+            kb["k"].steer_columns(kb["ca"], kb["cb"], kb["az"], kb["el"], _f64(uy), _f64(uz), w)
+            return w
         w = steering(self.detection_grid, uy, uz)
         if self.settings.near_field:
             w = w * self._near.focus(sines_to_unit(uy, uz), rho)
@@ -898,6 +949,13 @@ class RadarProcessor:
         refine = s.angle_refine and s.angle_method == "fft"
 
         def newton(xv: np.ndarray, uy0: np.ndarray, uz0: np.ndarray, rr: np.ndarray):
+            kb = self._beam_kernels
+            if kb is not None:
+                out = np.empty((3, np.size(uy0)))
+                kb["k"].newton_refine(_c64(xv), kb["ca"], kb["cb"], kb["az"], kb["el"],
+                                      _f64(uy0), _f64(uz0), step[0], step[1], 2, True, out[0],
+                                      out[1], out[2])
+                return out[0], out[1], out[2]
             if not self.settings.near_field:
                 return newton_refine(g, xv, uy0, uz0, step)
             f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
@@ -908,18 +966,29 @@ class RadarProcessor:
         if refine and primary.any():
             uy[primary], uz[primary], peak[primary] = newton(x[primary], uy[primary],
                                                              uz[primary], rho[primary])
+        if self._beam_kernels is not None:
+            deferred = np.isnan(uz) & ~primary     # secondaries without their elevation yet
+            if deferred.any():
+                uy, uz, peak, ci, x, rho, primary = self._screen_secondaries(
+                    x, ci, uy, uz, peak, rho, floor, primary, deferred)
         w = self._steer(uy, uz, rho)                                    # (M, P)
         if primary.all():
             return uy, uz, peak, w, ci
         # amplitude of each cell's strongest source and its response in the other directions
         first = np.flatnonzero(primary)[np.cumsum(primary) - 1]        # primary peak of each
-        amp = np.einsum("pm,mp->p", x, w) / m
         sec = ~primary
-        cross = np.einsum("mp,mp->p", np.conj(w[:, first[sec]]), w[:, sec]) / m
-        resid = np.abs(amp[sec] - amp[first[sec]] * cross) ** 2
+        kb = self._beam_kernels
+        if kb is not None:
+            resid, top = np.empty((2, ci.size))
+            kb["k"].secondary_residual(_c64(x), _c64(w), first.astype(np.int64), resid, top)
+            resid, top = resid[sec], top[sec]
+        else:
+            amp = np.einsum("pm,mp->p", x, w) / m
+            cross = np.einsum("mp,mp->p", np.conj(w[:, first[sec]]), w[:, sec]) / m
+            resid = np.abs(amp[sec] - amp[first[sec]] * cross) ** 2
+            top = np.abs(amp[first[sec]]) ** 2
         ok = np.ones(ci.size, dtype=bool)
-        ok[sec] = (resid >= floor[ci[sec]]) & (
-            resid >= np.abs(amp[first[sec]]) ** 2 * self._angle_dynamic)
+        ok[sec] = (resid >= floor[ci[sec]]) & (resid >= top * self._angle_dynamic)
         uy, uz, peak, w, ci, x, rho = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok], x[ok],
                                        rho[ok])
         # Joint least-squares amplitudes of each cell's remaining sources (sidelobes of a
@@ -933,6 +1002,18 @@ class RadarProcessor:
         uy, uz, peak, w, ci, x, rho, rank, cell_of = (
             uy[keep], uz[keep], peak[keep], w[:, keep], ci[keep], x[keep], rho[keep],
             rank[keep], cell_of[keep])
+        lone = None
+        several = np.bincount(cell_of)[cell_of] > 1
+        if not several.all():
+            # Cells with one source are final. Every step below works cell by cell, so only
+            # the cells with several take part (the same numbers, smaller arrays); the lone
+            # ones join them again at the end, in cell order.
+            one = ~several
+            lone = uy[one], uz[one], peak[one], w[:, one], ci[one]
+            uy, uz, peak, w, ci, x, rho, rank = (uy[several], uz[several], peak[several],
+                                                 w[:, several], ci[several], x[several],
+                                                 rho[several], rank[several])
+            _, cell_of = np.unique(ci, return_inverse=True)
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
@@ -964,7 +1045,38 @@ class RadarProcessor:
         amps = self._joint_amplitudes(x, w, cell_of, rank)
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
+        if lone is not None:
+            order = np.argsort(np.r_[lone[4], ci], kind="stable")
+            uy, uz, peak, ci = (np.r_[a, b][order] for a, b in zip(
+                (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
+            w = np.concatenate([lone[3], w], axis=1)[:, order]
         return uy, uz, peak, w, ci
+
+    def _screen_secondaries(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray,
+                            uz: np.ndarray, peak: np.ndarray, rho: np.ndarray,
+                            floor: np.ndarray, primary: np.ndarray, deferred: np.ndarray
+                            ) -> tuple[np.ndarray, ...]:
+        """Drop the secondary peaks that the residual test below rejects at every elevation
+        (compiled path): its residual beam power is at most ``(Σ_q |A_q| / M)²``, ``A_q`` the
+        residual's azimuth-steered sum over elevation row ``q``
+        (:func:`~coloradar.dsp._kernels.secondary_bound`); the others get their elevation
+        search now. Returns ``uy, uz, peak, ci, x, rho, primary`` of the peaks kept."""
+        kb = self._beam_kernels
+        assert kb is not None
+        lead = np.cumsum(primary) - 1                   # each peak's primary, among primaries
+        wp = self._steer(uy[primary], uz[primary], rho[primary])
+        bound, top = np.empty((2, ci.size))
+        kb["k"].secondary_bound(_c64(x), wp, lead.astype(np.int64), _f64(uy), kb["ca"], kb["az"],
+                                kb["row"], int(kb["row"].max()) + 1, bound, top)
+        hopeless = deferred & ((bound < floor[ci]) | (bound < top * self._angle_dynamic))
+        keep = ~hopeless
+        uy, uz, peak, ci, x, rho, primary, deferred = (
+            uy[keep], uz[keep], peak[keep], ci[keep], x[keep], rho[keep], primary[keep],
+            deferred[keep])
+        if deferred.any():
+            uz[deferred], peak[deferred] = self._elevation_search(x[deferred], uy[deferred],
+                                                                  rho[deferred])
+        return uy, uz, peak, ci, x, rho, primary
 
     def _residual_floor(self, x: np.ndarray, w: np.ndarray, amps: np.ndarray,
                         cell_of: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -1006,6 +1118,12 @@ class RadarProcessor:
         g = self.detection_grid
         if x.shape[0] == 0:
             return np.zeros(0), np.zeros(0)
+        kb = self._beam_kernels
+        if kb is not None:
+            out = np.empty((2, uy.size))
+            kb["k"].elevation_search(_c64(x), kb["ca"], kb["az"], kb["row"], kb["row_steer"],
+                                     kb["el_sines"], _f64(uy), float(g.rho), out[0], out[1])
+            return out[0], out[1]
         wa = self._steer(uy, np.zeros(uy.size), rho)                   # (M, P)
         # (einsum, not BLAS: threaded BLAS sums in an order that varies between runs, and
         # batch processing promises the bytes of serial processing)
@@ -1021,12 +1139,18 @@ class RadarProcessor:
         uz = 2.0 * (fe - ne // 2) / (ne * g.rho)
         return uz, bz[k, ie] / float(g.num_elements) ** 2
 
-    @staticmethod
-    def _joint_amplitudes(x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
+    def _joint_amplitudes(self, x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
                           rank: np.ndarray) -> np.ndarray:
         """Least-squares amplitudes of every cell's sources, batched: the sources of a cell
         are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak. A cell
         with one source gets its beam value; only cells with several are solved."""
+        kb = self._beam_kernels
+        if kb is not None and cell_of.size and np.all(np.diff(cell_of) >= 0):
+            # (the peaks of a cell are consecutive, as _resolve_peaks keeps them)
+            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1], True])
+            amps = np.empty(cell_of.size, dtype=np.complex128)
+            kb["k"].joint_amplitudes(_c64(x), _c64(w), starts.astype(np.int64), amps)
+            return amps
         out = np.einsum("pm,mp->p", x, w) / float(w.shape[0])
         counts = np.bincount(cell_of)
         multi = counts[cell_of] > 1
@@ -1067,14 +1191,24 @@ class RadarProcessor:
         """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
         around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
 
-        Each Doppler bin keeps its own TDM compensation (across the Doppler edge that of the
-        unwrapped neighbour) and the point's alias; range neighbours beyond the map repeat
-        the edge cell.
+        ``rd`` and ``rd_next`` without TDM phases (as :meth:`_detect`). Each Doppler bin gets
+        its own TDM compensation (across the Doppler edge that of the unwrapped neighbour)
+        and the point's alias; range neighbours beyond the map repeat the edge cell.
         """
-        ntx, _, nd, nr = rd.shape
+        ntx, nrx, nd, nr = rd.shape
         p = d.size
         out = np.zeros((p, 3, 3))
         if p == 0:
+            return out
+        kb = self._beam_kernels
+        if kb is not None and self.settings.overlap == "first":
+            nxt = (rd_next[..., 0].reshape(ntx * nrx, nd)
+                   if rd_next is not None and rd_next.shape[-1] else np.zeros((0, 0)))
+            kb["k"].beam_neighbourhood(
+                _c64(rd.reshape(ntx * nrx, nd, nr)), _c64(nxt), kb["chan"], kb["tx"], ntx,
+                np.ascontiguousarray(d, dtype=np.int64), np.ascontiguousarray(r, dtype=np.int64),
+                _f64(np.zeros(p) if alias is None else alias), self._tdm is not None,
+                _c64(steer), out)
             return out
         m2 = float(self.detection_grid.num_elements) ** 2
         for i, j in enumerate((-1, 0, 1)):
@@ -1091,6 +1225,8 @@ class RadarProcessor:
                 if jr == 1 and rd_next is not None and rd_next.shape[-1]:
                     beyond = r + 1 >= nr
                     v = np.where(beyond[None, None, :], rd_next[:, :, dn, 0], v)
+                if self._tdm is not None:
+                    v = v * self._tdm_at(dn)
                 if ph is not None:
                     v = v * ph[:, None, :]
                 el = combine_channels(v, self.calib.antenna.virtual, self.settings.overlap)
@@ -1121,6 +1257,8 @@ class RadarProcessor:
         ntx = rd.shape[0]
         jd, jr = exp_d[pj], exp_r[pj]
         v = rd[:, :, jd, jr]
+        if self._tdm is not None:
+            v = v * self._tdm_at(jd)
         if alias is not None:
             v = v * alias_phase(ntx, alias[pi])[:, None, :]
         el = combine_channels(v, self.calib.antenna.virtual, s.overlap)
@@ -1209,9 +1347,13 @@ class RadarProcessor:
         """
         nr = self.num_range_bins
         rcube = self._range_cube(adc, extra=pointcloud)
-        rd = self._doppler(rcube[..., :nr])
-        pts = (self._detect(rcube[..., :nr], rd, self._doppler(rcube[..., nr:])).pointcloud()
-               if pointcloud else None)
+        rd = self._doppler(rcube[..., :nr], compensate=not pointcloud)
+        pts = None
+        if pointcloud:
+            pts = self._detect(rcube[..., :nr], rd,
+                               self._doppler(rcube[..., nr:], compensate=False)).pointcloud()
+            if heatmap and self._tdm is not None:
+                rd *= self._tdm                      # as _doppler: the heatmap's bits
         if not heatmap:
             return None, pts
         return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
@@ -1221,6 +1363,16 @@ class RadarProcessor:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
                    if getattr(self.settings, f.name) != f.default}
         return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+def _f64(a: Any) -> np.ndarray:
+    """Contiguous float64 (the dtype and layout the compiled kernels are built for)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _c64(a: Any) -> np.ndarray:
+    """Contiguous complex64 (the dtype and layout the compiled kernels are built for)."""
+    return np.ascontiguousarray(a, dtype=np.complex64)
 
 
 def _power_sum(cube: np.ndarray) -> np.ndarray:
