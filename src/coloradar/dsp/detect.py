@@ -20,7 +20,7 @@ from .array import sines_to_unit
 from .cfar import CFAREdge, CFARKind, cfar
 
 __all__ = ["Detections", "channel_noise", "heatmap_cell_xyz", "heatmap_pointcloud", "local_maxima",
-           "sidelobe_envelope", "sidelobe_mask", "sidelobe_pairs"]
+           "sidelobe_envelope", "sidelobe_mask", "sidelobe_pairs", "source_fit_residuals"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,6 +123,59 @@ def channel_noise(power: np.ndarray, first_range: int = 0,
     mid = cells.shape[1] // 2
     med = np.partition(cells, mid, axis=1)[:, mid].astype(np.float64)
     return np.maximum(med / np.log(2.0), np.finfo(np.float64).tiny)
+
+
+def source_fit_residuals(x: np.ndarray, dictionary: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Residual power of the best one-source and two-source fits of line-array vectors.
+
+    The model selection of the Doppler alias search (docs/dsp.md, "Doppler beyond ±v_max"):
+    a vector is ``Σ_k s_k a(u_k) + noise`` with ``n`` = 1 or 2 sources of unknown complex
+    amplitude ``s_k`` and direction ``u_k`` on a grid. One source: the beam's peak
+    (``RSS₁ = |x|² − max_u |aᴴx|²/M``). Two sources: alternating projection (Ziskind & Wax
+    1988) started at the beam's peak: the second direction is the peak of what the first
+    leaves, the first is found again on what the second leaves, and the pair's joint least
+    squares gives ``RSS₂`` (a local optimum, ≥ the global one).
+
+    Parameters
+    ----------
+    x
+        complex ``(N, M)``: N vectors of M elements.
+    dictionary
+        complex ``(M, G)``: column ``g`` is ``conj(a(u_g))`` (so ``x @ dictionary`` is the
+        beam ``aᴴx``), unit-modulus elements.
+
+    Returns
+    -------
+    tuple
+        float64 ``(rss1, rss2)``, each ``(N,)``, in the units of ``|x|²``; ``rss2 ≤ rss1``.
+    """
+    x = np.asarray(x)
+    n, m = x.shape
+    if n == 0:
+        e = np.zeros(0)
+        return e, e
+    k = np.arange(n)
+    steer = np.conj(dictionary.T)                                       # (G, M): a(u)
+    total = np.sum(np.abs(x) ** 2, axis=1).astype(np.float64)
+    b = x @ dictionary                                                  # (N, G)
+    i1 = np.argmax(np.abs(b), axis=1)
+    b1 = b[k, i1]
+    rss1 = np.maximum(total - np.abs(b1) ** 2 / m, 0.0)
+    # the second source on what the first leaves, then the first on what the second leaves
+    left = x - steer[i1] * (b1 / m)[:, None]
+    i2 = np.argmax(np.abs(left @ dictionary), axis=1)
+    b2 = b[k, i2]
+    left = x - steer[i2] * (b2 / m)[:, None]
+    i1 = np.argmax(np.abs(left @ dictionary), axis=1)
+    b1 = b[k, i1]
+    # joint least squares on (a1, a2): explained = bᴴ G⁻¹ b, G = [[M, c], [c*, M]]
+    c = np.sum(np.conj(steer[i1]) * steer[i2], axis=1)                  # a1ᴴa2
+    det = m * m - np.abs(c) ** 2
+    expl = (m * (np.abs(b1) ** 2 + np.abs(b2) ** 2)
+            - 2.0 * np.real(c * np.conj(b1) * b2)) / np.maximum(det, 1e-9 * m * m)
+    rss2 = np.where(det > 1e-6 * m * m, np.maximum(total - expl, 0.0), rss1)
+    return rss1, np.minimum(rss2, rss1)
 
 
 def sidelobe_envelope(window: np.ndarray, fft_size: int, num_lags: int,

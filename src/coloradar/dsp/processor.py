@@ -60,7 +60,14 @@ from .cfar import (
     power_correlation,
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
-from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_pairs
+from .detect import (
+    Detections,
+    channel_noise,
+    local_maxima,
+    sidelobe_envelope,
+    sidelobe_pairs,
+    source_fit_residuals,
+)
 from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
@@ -134,9 +141,9 @@ class ProcessingSettings:
         angles compensated for the folded Doppler).
     alias_margin_db
         Radars without overlapping virtual pairs (the single chip) choose the Doppler alias
-        by the highest beam peak; another hypothesis must beat the folded one by this margin
-        [dB] (two sources in one cell can favour a wrong one by ~1 dB; a wrong hypothesis
-        defocuses a lone source by several).
+        by a model selection on the filled row (one or two sources under each hypothesis,
+        :meth:`RadarProcessor._choose_alias`); another hypothesis must explain this margin
+        [dB] more power than the folded one.
     heatmap_unwrap
         Heatmaps with disambiguated Doppler: cells that pass the CFAR are compensated for
         their best alias hypothesis before the angle FFT, and channel 1 carries the unwrapped
@@ -469,6 +476,14 @@ class RadarProcessor:
                                  * dg.el_sines[None, :]).astype(np.complex64)
         _, counts = np.unique(dg.el_pos, return_counts=True)
         self._row_noise = float(dg.num_elements / counts.max())
+        # Doppler alias search without overlapping pairs: one- and two-source fits of the
+        # filled row under each hypothesis (_choose_alias); a second source must explain
+        # more than noise reaches in the best of the row's ~M_row beams at angle_pfa.
+        self._row_sel = dg.el_pos == rows_el[np.argmax(counts)]
+        az_u = dg.az_sines[self._visible_az]
+        self._row_dict = np.exp(-1j * np.pi * dg.rho * dg.az_pos[self._row_sel][:, None]
+                                * az_u[None, :]).astype(np.complex64)         # (M_row, G)
+        self._alias_penalty = float(np.log(self._row_sel.sum() / s.angle_pfa))
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         self._near = NearField(tx - c_true, rx - c_true,
@@ -623,13 +638,16 @@ class RadarProcessor:
         hyps = self._aliases
         if hyps.size < 2:
             return self._heatmap(rd)
-        stat, _, looks, _ = self._detection_map(rd)
-        mask, _ = self._cfar_mask(stat, looks)
+        stat, _, looks, sig2 = self._detection_map(rd)
+        mask, noise = self._cfar_mask(stat, looks)
         d, r = np.nonzero(mask)
         if d.size == 0:
             return self._heatmap(rd)
         nd = rd.shape[2]
-        alias, _ = self._choose_alias(rd[:, :, d, r], (d - nd // 2).astype(np.float64))
+        elem_noise = (noise[d, r] * self._beam_noise_factor(sig2)
+                      * self.detection_grid.num_elements)
+        alias, _ = self._choose_alias(rd[:, :, d, r], (d - nd // 2).astype(np.float64),
+                                      elem_noise)
         assert alias is not None
         moved = alias != 0
         d, r, alias = d[moved], r[moved], alias[moved]
@@ -772,7 +790,11 @@ class RadarProcessor:
         if self._tdm is not None:
             # rd holds bin-centre compensation; add the fractional remainder.
             vecs = vecs * tdm_phase(ntx, d_ref - d, nd)[:, None, :]
-        alias, spec = self._choose_alias(vecs, k_signed)
+        # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
+        # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
+        beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
+        alias, spec = self._choose_alias(vecs, k_signed,
+                                         beam_noise * self.detection_grid.num_elements)
         if alias is not None:
             vecs = vecs * alias_phase(ntx, alias)[:, None, :]
         vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T  # (K, M)
@@ -786,9 +808,6 @@ class RadarProcessor:
             snaps = combine_channels(snaps, self.calib.antenna.virtual, s.overlap)
             spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
                                   s.capon_loading, workers=s.workers)
-        # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
-        # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
-        beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
         floor = self._angle_floor * beam_noise
         rho_cell = np.maximum(r, 1) * self.range_bin_width
         rel = self._angle_dynamic if s.multi_peak else np.inf
@@ -1135,13 +1154,26 @@ class RadarProcessor:
         keep[pi[explained]] = False
         return keep
 
-    def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
+    def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray,
+                      noise: np.ndarray | None = None
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`); the second value is
         None (kept for callers).
 
-        ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``.
+        ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``;
+        ``noise``: float ``(K,)``, the mean noise power per virtual element of each
+        detection (None: radars without overlapping pairs score by the row beam's peak).
         Returns ``(None, None)`` when the search is off.
+
+        Without overlapping pairs the choice is a model selection on the filled row: each
+        hypothesis ``m`` is fitted with one source and with two (:func:`~coloradar.dsp.
+        detect.source_fit_residuals`), the two-source fit charged ``ln(M_row/angle_pfa)``
+        noise powers (what the best of the row's beams reaches on noise alone at
+        ``angle_pfa``), and the hypothesis whose better model leaves the least wins. One
+        aliased source is no pair of sources at another alias (the best such pair leaves
+        8 % of its power on the single chip's 8-element row), and two sources in one cell
+        are no aliased single source (≥ 38 % left at 30° apart), so both are told apart
+        where the scorer by peak confused them (docs/dsp.md).
         """
         hyps = self._aliases
         if hyps.size < 2:
@@ -1164,15 +1196,21 @@ class RadarProcessor:
                 kk = ks.stop - k0
                 cand = vecs[:, :, ks, None] * ph[:, None, None, :]             # (tx, rx, k, H)
                 el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
-                # Beam of the filled azimuth row: a wrong hypothesis puts a phase step
-                # between the TX blocks along it and defocuses it (no elevation ghosts).
-                prof = row_profile(g, el.reshape(el.shape[0], kk * hyps.size).T,
-                                   workers=self.settings.workers)
-                prof = np.where(self._visible_az[None], prof, 0.0)
-                sc = prof.reshape(kk, hyps.size, g.num_az).max(axis=2)
-                # Two sources in one cell can make a wrong hypothesis' beam peak a little
-                # higher than the right one's (a wrong one defocuses a lone source by
-                # several dB): the folded hypothesis keeps a small margin.
+                # The filled azimuth row: a wrong hypothesis puts a phase step between the TX
+                # blocks along it and defocuses it (no elevation ghosts).
+                if noise is not None:
+                    row = el[self._row_sel].reshape(-1, kk * hyps.size).T       # (k·H, M_row)
+                    rss1, rss2 = source_fit_residuals(row, self._row_dict)
+                    pen = np.repeat(self._alias_penalty * noise[ks], hyps.size)
+                    left = np.minimum(rss1, rss2 + pen)
+                    # power explained by the hypothesis' better model (same |x|² for all)
+                    sc = (np.sum(np.abs(row) ** 2, axis=1) - left).reshape(kk, hyps.size)
+                else:
+                    prof = row_profile(g, el.reshape(el.shape[0], kk * hyps.size).T,
+                                       workers=self.settings.workers)
+                    prof = np.where(self._visible_az[None], prof, 0.0)
+                    sc = prof.reshape(kk, hyps.size, g.num_az).max(axis=2)
+                # (optional margin for the folded hypothesis, alias_margin_db)
                 sc = np.where(hyps[None, :] == 0, sc, sc * self._alias_margin)
                 sc = np.where(allowed[ks], sc, -np.inf)
                 score[ks] = sc
