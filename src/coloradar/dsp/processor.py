@@ -183,11 +183,14 @@ class ProcessingSettings:
         arrays: calibration residue, mutual coupling).
     near_field
         Focus beams at the detection's range (:class:`~coloradar.dsp.angle.NearField`): the
-        cascade's aperture is in its near field over the whole processed range. Off by
-        default: a calibration measured on a near reflector (the release's cascade file: a
-        reflector at ≈ 3.0 m, from its bins) already focuses every channel at that range,
-        and focusing again would add its phases twice (docs/dsp.md, "Near field"). On for
-        frames whose calibration carries no near-field phases (simulated frames).
+        cascade's aperture is in its near field over the whole processed range. ``"auto"``
+        (default): where the calibration focuses the channels at its reflector's range
+        (:attr:`~coloradar.calib.RadarCalib.near_field_reference`: the release's cascade
+        file, ≈ 3.0 m), focus relative to it, ``exp(−jk(q(ρ) − q(R0)))``; where it does not
+        (no phase calibration, or one marked far-field as the simulator's), no focusing.
+        True: always focus (relative to the calibration's reflector when it has one,
+        absolute when not: spherical-wave frames without a near-field calibration). False:
+        plane-wave beams (docs/dsp.md, "Near field").
     phase_centre
         Points from the virtual array's phase centre (True: the physics of a real array, whose
         range FFT and beams measure range and direction from it; the point is that position
@@ -247,7 +250,7 @@ class ProcessingSettings:
     angle_pfa: float = 1e-3
     angle_refine: bool = True
     angle_dynamic_range_db: float = 20.0
-    near_field: bool = False
+    near_field: bool | Literal["auto"] = "auto"
     phase_centre: bool = True
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
@@ -261,6 +264,7 @@ class ProcessingSettings:
                    "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
                    "noise_weighting": NOISE_WEIGHTINGS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1), "engine": ENGINES}
+        choices["near_field"] = (True, False, "auto")
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise SettingsError(f"{name} = {getattr(self, name)!r}; expected one of "
@@ -303,6 +307,12 @@ class ProcessingSettings:
                                 f"got {text!r}")
         default = defaults[name]
         try:
+            if name == "near_field":                     # a flag or "auto"
+                if value.lower() == "auto":
+                    return name, "auto"
+                if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError
+                return name, value.lower() in ("true", "1", "yes")
             if value.lower() == "none" and default is None:
                 return name, None
             if isinstance(default, bool):
@@ -486,8 +496,12 @@ class RadarProcessor:
         self._alias_penalty = float(np.log(self._row_sel.sum() / s.angle_pfa))
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        # Near field: relative to the range at which the calibration focused the channels.
+        ref = self.calib.near_field_reference
+        self._focus = bool(s.near_field is True or (s.near_field == "auto" and ref is not None))
         self._near = NearField(tx - c_true, rx - c_true,
-                               2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT)
+                               2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT,
+                               reference=ref if s.phase_frequency_calibration else None)
         # The last processed range bin: a tone within half a bin of it gives at most this
         # power ratio to the bin before (window main lobe); beyond it, more.
         self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
@@ -886,7 +900,7 @@ class RadarProcessor:
         ``rho`` from the phase centre: ``B(u) = Σ_m x_m w_m / M`` is ``s`` for a source
         ``s`` at ``(rho, u)``."""
         w = steering(self.detection_grid, uy, uz)
-        if self.settings.near_field:
+        if self._focus:
             w = w * self._near.focus(sines_to_unit(uy, uz), rho)
         return w
 
@@ -917,7 +931,7 @@ class RadarProcessor:
         refine = s.angle_refine and s.angle_method == "fft"
 
         def newton(xv: np.ndarray, uy0: np.ndarray, uz0: np.ndarray, rr: np.ndarray):
-            if not self.settings.near_field:
+            if not self._focus:
                 return newton_refine(g, xv, uy0, uz0, step)
             f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
             return newton_refine(g, xv * f, uy0, uz0, step)
