@@ -498,7 +498,7 @@ class RadarProcessor:
         c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         # Near field: relative to the range at which the calibration focused the channels.
         ref = self.calib.near_field_reference
-        self._focus = bool(s.near_field is True or (s.near_field == "auto" and ref is not None))
+        self._focus = (ref is not None if s.near_field == "auto" else bool(s.near_field))
         self._near = NearField(tx - c_true, rx - c_true,
                                2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT,
                                reference=ref if s.phase_frequency_calibration else None)
