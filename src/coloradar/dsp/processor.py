@@ -490,9 +490,7 @@ class RadarProcessor:
         # filled row under each hypothesis (_choose_alias); a second source must explain
         # more than noise reaches in the best of the row's ~M_row beams at angle_pfa.
         self._row_sel = dg.el_pos == rows_el[np.argmax(counts)]
-        az_u = dg.az_sines[self._visible_az]
-        self._row_dict = np.exp(-1j * np.pi * dg.rho * dg.az_pos[self._row_sel][:, None]
-                                * az_u[None, :]).astype(np.complex64)         # (M_row, G)
+        self._row_bins = dg.az_read[self._visible_az]                  # the row beam's grid
         self._alias_penalty = float(np.log(self._row_sel.sum() / s.angle_pfa))
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
@@ -1214,8 +1212,13 @@ class RadarProcessor:
                 # blocks along it and defocuses it (no elevation ghosts).
                 if noise is not None:
                     row = el[self._row_sel].reshape(-1, kk * hyps.size).T       # (k·H, M_row)
-                    rss1, rss2 = source_fit_residuals(row, self._row_dict)
                     pen = np.repeat(self._alias_penalty * noise[ks], hyps.size)
+                    args = (row, g.az_pos[self._row_sel], g.n_az, self._row_bins)
+                    rss1, _ = source_fit_residuals(*args, fit=np.zeros(row.shape[0], bool))
+                    # Where the best one-source fit leaves no more than a second source is
+                    # charged, no two-source fit can win: those detections skip it.
+                    need = rss1.reshape(kk, hyps.size).min(axis=1) > pen[::hyps.size]
+                    rss1, rss2 = source_fit_residuals(*args, fit=np.repeat(need, hyps.size))
                     left = np.minimum(rss1, rss2 + pen)
                     # power explained by the hypothesis' better model (same |x|² for all)
                     sc = (np.sum(np.abs(row) ** 2, axis=1) - left).reshape(kk, hyps.size)
