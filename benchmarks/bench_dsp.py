@@ -65,10 +65,16 @@ CPU_CLOCK = False
 
 def calibration(name: str, calib_dir: Path | None):
     """Real calibration when available, else the preset with realistic errors and coupling."""
+    # frames() synthesises far-field echoes and imposes the file's channel errors as they are:
+    # the calibration is marked as carrying no near-field phases, so that it describes these
+    # frames (real frames get focusing relative to the file's reflector, docs/dsp.md).
     if calib_dir is not None and calib_dir.is_dir():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return load_calibration(calib_dir).radar(name), "real calib files"
+            rc = load_calibration(calib_dir).radar(name)
+        if rc.phase_frequency is not None:
+            rc = replace(rc, phase_frequency=replace(rc.phase_frequency, near_field=False))
+        return rc, "real calib files"
     rc = preset_radar(name)
     g = np.random.default_rng(0)
     w = rc.waveform
@@ -79,7 +85,8 @@ def calibration(name: str, calib_dir: Path | None):
     pf = None
     if name == "cascade":
         pf = PhaseFrequencyCalib(51 + 0.3 * g.standard_normal(shape),
-                                 np.exp(2j * np.pi * g.random(shape)), w.slope, w.sample_rate)
+                                 np.exp(2j * np.pi * g.random(shape)), w.slope, w.sample_rate,
+                                 near_field=False)
     return replace(rc, coupling=coupling, phase_frequency=pf), "presets + synthetic errors"
 
 

@@ -121,3 +121,43 @@ def exact_adc(calib, positions, velocities=None, amplitudes=1.0, *, noise_std: f
         g = np.random.default_rng(rng)
         out += noise_std * (g.standard_normal(out.shape) + 1j * g.standard_normal(out.shape))
     return out.astype(np.complex64)
+
+
+def calibrated_hardware(calib):
+    """The channel errors of the hardware behind ``calib``'s phase/frequency calibration
+    (tests only): a calibration measured on a reflector near the array holds the hardware's
+    phases *and* that reflector's spherical-wave phases, so the hardware is the calibration
+    less the reflector's own channel phases and path-length beat shifts.
+
+    The reflector: on boresight of the virtual array's phase centre at the range of the
+    file's mean peak bin (bins of ``c·fs_cal/(2·S_cal·Ns)``); its phases are measured on an
+    exact spherical-wave capture (:func:`exact_adc`, channel (0, 0) the reference), its path
+    lengths from the antenna positions. Imposing the result (``coloradar.sim.
+    apply_channel_errors``) on frames of :func:`exact_adc` gives what a real board with that
+    calibration records. Returns the calibration itself when it holds no near-field phases
+    (``near_field=False``) and None without one.
+    """
+    from dataclasses import replace
+
+    from coloradar.dsp.array import phase_centre
+
+    pf = calib.phase_frequency
+    if pf is None or not pf.near_field:
+        return pf
+    c0 = 299_792_458.0
+    w, ant = calib.waveform, calib.antenna
+    r0 = float(np.mean(pf.frequency)) * c0 * pf.sample_rate / (2.0 * pf.slope * w.num_samples)
+    x0 = phase_centre(ant) + np.array([r0, 0.0, 0.0])
+    hw = ant.half_wavelength
+    tx = np.c_[np.zeros(ant.num_tx), ant.tx_positions * hw]
+    rx = np.c_[np.zeros(ant.num_rx), ant.rx_positions * hw]
+    path = (np.linalg.norm(x0 - tx, axis=1)[:, None] + np.linalg.norm(x0 - rx, axis=1)[None, :])
+    bins = (path - path[0, 0]) * pf.slope * w.num_samples / (c0 * pf.sample_rate)
+    # The file's model (conventions §2): a channel's beat frequency is moved onto the
+    # reference's by a ramp from sample 0, then its phase aligned. So the reflector's phase
+    # of a channel is that of its capture at sample 0 once its own beat shift is removed.
+    cap = exact_adc(calib, [x0])[:, :, 0, :].astype(np.complex128)          # (tx, rx, ns)
+    n = np.arange(w.num_samples)
+    cap = cap * np.exp(-2j * np.pi * bins[:, :, None] * n / w.num_samples)
+    phi = np.angle(np.sum(cap * np.conj(cap[0, 0])[None, None, :], axis=-1))
+    return replace(pf, phase=pf.phase * np.exp(-1j * phi), frequency=pf.frequency - bins)

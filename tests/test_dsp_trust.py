@@ -2,7 +2,10 @@
 
 Frames come from :func:`_synth.exact_adc` (exact spherical-wave delays per TX, RX, chirp and
 sample; written for the tests, sharing nothing with the processor) with the release's
-calibration: its channel errors are imposed and the processor's calibration removes them.
+calibration: the hardware's channel errors that it implies are imposed
+(:func:`_synth.calibrated_hardware`: the calibration less the near-field phases of the
+reflector it was measured on, as on the real board) and the processor's calibration removes
+the calibration's.
 Noise enters before the channel errors (receiver noise). "SNR" is the per-channel SNR of a
 target in its range–Doppler cell: amplitude ``a`` per sample, complex noise of variance
 ``2σ²``, periodic Hann windows of unit coherent gain over ``Ns`` samples and ``Nc`` loops:
@@ -19,7 +22,7 @@ import warnings
 import numpy as np
 import pytest
 
-from _synth import REFERENCE_CALIB, exact_adc
+from _synth import REFERENCE_CALIB, calibrated_hardware, exact_adc
 from coloradar.calib import load_calibration, preset_radar
 from coloradar.dsp import RadarProcessor
 from coloradar.sim import apply_channel_errors
@@ -53,9 +56,20 @@ def frame(calib, positions, snr_db, *, velocities=None, seed=0, phases=None):
     amps = [amplitude(calib, s) * ri**2 * np.exp(1j * p) for s, ri, p in zip(snr, r, ph,
                                                                           strict=True)]
     x = exact_adc(calib, pos, velocities, amps, noise_std=SIGMA, rng=seed)
-    if calib.phase_frequency is not None:
-        x = apply_channel_errors(x, calib.phase_frequency)
+    hardware = _hardware(calib)
+    if hardware is not None:
+        x = apply_channel_errors(x, hardware)
     return x
+
+
+_HARDWARE: dict[int, object] = {}
+
+
+def _hardware(calib):
+    """:func:`calibrated_hardware` of ``calib``, computed once per calibration object."""
+    if id(calib) not in _HARDWARE:
+        _HARDWARE[id(calib)] = (calib, calibrated_hardware(calib))
+    return _HARDWARE[id(calib)][1]
 
 
 def direction(az_deg, el_deg=0.0):
@@ -88,24 +102,36 @@ def tolerance_deg(calib) -> float:
     return max(1.0, rayleigh_deg(calib) / 4)
 
 
-@pytest.mark.parametrize(("name", "separation"), [
-    ("cascade", 30.0), ("cascade", "3x"), ("single_chip", 30.0)])
-def test_two_equal_scatterers_in_one_cell_are_both_found(radars, name, separation):
-    """Same range, same range rate, random phases: both found in >= 9 of 10 trials."""
+def frame_time(calib) -> float:
+    """Duration of the chirps of one frame [s] (a moving target's mean position is at half)."""
+    w = calib.waveform
+    return float(w.num_tx * w.num_chirps * (w.idle_time + w.ramp_end_time))
+
+
+@pytest.mark.parametrize(("name", "separation", "moving"), [
+    ("cascade", 30.0, False), ("cascade", "3x", False), ("single_chip", 30.0, False),
+    ("single_chip", 30.0, True), ("single_chip", 45.0, True)])
+def test_two_equal_scatterers_in_one_cell_are_both_found(radars, name, separation, moving):
+    """Same range, same range rate, random phases, default settings (the Doppler alias search
+    on): both found in >= 9 of 10 trials. ``moving``: a shared range rate of 0.5-2.5 v_max,
+    folded or not (walls of a corridor driven along), truth at mid-frame."""
     calib = radars[name]
-    # The single chip's alias search (doppler_unwrap) cannot tell two sources in one cell
-    # from one aliased source (its 8-element row; docs/dsp.md): measured here with it off.
-    proc = RadarProcessor(calib, coupling_subtraction=False,
-                          **({"doppler_unwrap": 0.0} if name == "single_chip" else {}))
+    proc = RadarProcessor(calib, coupling_subtraction=False)
     sep = 3 * rayleigh_deg(calib) if separation == "3x" else float(separation)
     az_tol = tolerance_deg(calib)
-    g = np.random.default_rng(19)
+    g = np.random.default_rng(19 + 10 * int(moving) + int(sep))
     hits = 0
     for i in range(10):
         r = proc.range_bin_width * (np.floor(g.uniform(2.5, 6.0) / proc.range_bin_width) + 0.3)
         a0 = g.uniform(-45, 45 - sep)
         targets = [r * direction(a0), r * direction(a0 + sep)]
-        det = proc.detect(frame(calib, targets, 20.0, seed=i, phases=[0, g.uniform(0, 2 * np.pi)]))
+        vel, start = None, targets
+        if moving:
+            v = g.choice([-1, 1]) * g.uniform(0.5, 2.5) * calib.waveform.max_velocity
+            vel = [v * direction(a0), v * direction(a0 + sep)]
+            start = [t - 0.5 * frame_time(calib) * vk for t, vk in zip(targets, vel, strict=True)]
+        det = proc.detect(frame(calib, start, 20.0, velocities=vel, seed=i,
+                                phases=[0, g.uniform(0, 2 * np.pi)]))
         hits += all(found(det, t, 0.1, az_tol) for t in targets)
     assert hits >= 9, hits
 
@@ -115,8 +141,7 @@ def test_a_target_one_doppler_bin_from_a_stronger_one_is_kept(radars, name):
     """Stronger target (30 dB) and a weaker one (20 dB) one Doppler bin apart, same range, other
     direction: the weaker is not swallowed by the local-maximum grouping (>= 9 of 10)."""
     calib = radars[name]
-    proc = RadarProcessor(calib, coupling_subtraction=False,
-                          **({"doppler_unwrap": 0.0} if name == "single_chip" else {}))
+    proc = RadarProcessor(calib, coupling_subtraction=False)
     dv = calib.waveform.velocity_bin_width
     g = np.random.default_rng(7)
     hits = 0
@@ -159,16 +184,16 @@ def test_few_points_off_every_scatterer_beside_an_extended_target(radars, name, 
     cells, noise) stay at <= 1 a frame, and the point targets are found (cascade: >= 30 of 32
     within 0.3 m; the single chip's two elevation rows put some of them > 0.3 m off).
 
-    The cascade focuses its beams (``near_field=True``): these frames are spherical waves
-    with no near-reflector calibration, and far-field beams on its 16 cm aperture leave
-    shoulders (docs/dsp.md, "Near field"). Measured when written: 4 spurious points in 8
-    frames on each radar; with a lax angle test (``angle_pfa=0.3``,
-    ``angle_dynamic_range_db=30``) the cascade makes 22.
+    Default settings: the cascade focuses its beams relative to its calibration's reflector
+    (``near_field="auto"``; far-field beams on its 16 cm aperture leave shoulders, docs/dsp.md,
+    "Near field"). Measured when written (``near_field=True`` on frames without the
+    reflector's phases): 4 spurious points in 8 frames on each radar; with a lax angle test
+    (``angle_pfa=0.3``, ``angle_dynamic_range_db=30``) the cascade makes 22.
     """
     from scipy.spatial import cKDTree
 
     calib = radars[name]
-    proc = RadarProcessor(calib, coupling_subtraction=False, near_field=name == "cascade")
+    proc = RadarProcessor(calib, coupling_subtraction=False)
     g = np.random.default_rng(100)
     spurious, found_points = 0, 0
     for i in range(8):
@@ -228,14 +253,14 @@ def test_angle_rmse_is_within_twice_the_cramer_rao_bound(radars, name, snr_db):
     """RMSE of the direction sine u_y over 15 trials (azimuth ±30°, targets at range and
     Doppler bin centres) <= 2 × sqrt(CRB).
 
-    These frames carry spherical waves and a calibration without near-field phases, so the
-    beams are focused at each detection's range (``near_field=True``); the default (off, for
-    the release's calibration, which a 3 m reflector focused) is bias-limited on them at
-    2.5-6 m (docs/dsp.md, "Near field")."""
+    Default settings: the frames carry spherical waves and the hardware errors behind the
+    release's calibration, whose reflector (≈ 3.0 m) focused the channels; the beams are
+    focused relative to it (``near_field="auto"``). Plane-wave beams (``near_field=False``)
+    are bias-limited at 2.5-6 m (docs/dsp.md, "Near field")."""
     from coloradar.dsp.array import phase_centre
 
     calib = radars[name]
-    proc = RadarProcessor(calib, coupling_subtraction=False, near_field=True)
+    proc = RadarProcessor(calib, coupling_subtraction=False)
     centre = phase_centre(calib.antenna)
     g = np.random.default_rng(int(snr_db))
     err = []
@@ -337,11 +362,18 @@ def corridor(g: np.random.Generator, n: int = 70) -> np.ndarray:
 def test_ego_velocity_is_never_silently_wrong_up_to_10_m_s(radars, name):
     """Frames of a static corridor (the simulator's forward model) at 1-10 m/s: no estimate
     with ok=True is off by more than 0.2 m/s; at walking speeds the estimate is ok; with a
-    velocity prior (0.3 m/s off) the fast frames are ok wherever the range rates allow."""
+    velocity prior (0.3 m/s off) the fast frames are ok wherever the range rates allow.
+
+    The simulator's model is far-field: its frames go with a calibration whose phases carry
+    no near-field term (as the simulator writes its own, ``near_field=False``)."""
+    from dataclasses import replace
+
     from coloradar.odometry import VelocityPrior, ego_velocity_config, estimate_ego_velocity
     from coloradar.sim import synthesize_adc
 
     calib = radars[name]
+    if calib.phase_frequency is not None:
+        calib = replace(calib, phase_frequency=replace(calib.phase_frequency, near_field=False))
     proc = RadarProcessor(calib, coupling_subtraction=False)
     cfg = ego_velocity_config(calib)
     g = np.random.default_rng(23)
@@ -367,3 +399,97 @@ def test_ego_velocity_is_never_silently_wrong_up_to_10_m_s(radars, name):
                 slow_ok += int(estimate_ego_velocity(cloud, config=cfg).ok)
     assert wrong == 0
     assert slow_ok == slow
+
+
+# ------------------------------------------------------------------ near-field reference
+def test_the_calibration_states_where_it_focuses_the_array(radars):
+    """The release's cascade file: its reflector's range from the peak bins (about 3 m, the
+    documented calibration distance); the simulator's calibration holds no near-field phases
+    (far-field frames), and the flag survives its file; the single chip has no reference."""
+    from dataclasses import replace
+
+    from coloradar.calib import format_phase_frequency_calib, parse_phase_frequency_calib
+    from coloradar.sim import simulated_calibration
+
+    cas = radars["cascade"]
+    if cas.phase_frequency is not None:
+        w = cas.waveform
+        bin_width = 299_792_458.0 * w.sample_rate / (2 * w.slope * w.num_samples)
+        assert cas.near_field_reference == pytest.approx(
+            np.mean(cas.phase_frequency.frequency) * bin_width)
+        assert 2.9 < cas.near_field_reference < 3.2
+        text = format_phase_frequency_calib(cas.phase_frequency)
+        assert "nearFieldPhases" not in text                   # the dataset's format as is
+        far = replace(cas.phase_frequency, near_field=False)
+        back = parse_phase_frequency_calib(format_phase_frequency_calib(far))
+        assert back.near_field is False and back.reference_range(256) is None
+    assert radars["single_chip"].near_field_reference is None
+    sim, _ = simulated_calibration()
+    assert sim.radar("cascade").near_field_reference is None
+
+
+@pytest.mark.parametrize("near_field", ["auto", True, False])
+def test_a_target_at_the_calibration_reflector_needs_no_focusing(radars, near_field):
+    """A strong target where the calibration's reflector stood (boresight of the phase
+    centre, at its range): the calibration alone aligns its channels, so the default's
+    relative focusing leaves it exactly on boresight, as do plane-wave beams; absolute
+    focusing would add the reflector's phases twice (``near_field=True`` is relative too)."""
+    from coloradar.dsp.array import phase_centre
+
+    calib = radars["cascade"]
+    if calib.near_field_reference is None:
+        pytest.skip("no near-field calibration")
+    proc = RadarProcessor(calib, coupling_subtraction=False, near_field=near_field)
+    centre = phase_centre(calib.antenna)
+    target = centre + np.array([calib.near_field_reference, 0.0, 0.0])
+    det = proc.detect(frame(calib, [target], 40.0, seed=5))
+    j = int(np.argmax(det.intensity))
+    d = det.xyz[j] - centre
+    assert abs(d[1] / np.linalg.norm(d)) < 2e-4, d / np.linalg.norm(d)
+
+
+# ------------------------------------------------------------ alias model selection, pieces
+def test_source_fits_against_brute_force():
+    """One- and two-source residuals of an 8-element row (the single chip's) against an
+    exhaustive search: the one-source fit (interpolated between grid points) matches a
+    search on a 40× finer grid; the two-source fit (alternating projection) reaches the
+    exhaustive pair's residual on the grid for two separated sources, and never goes below
+    it. The documented separation
+    of the alias hypotheses: the best pair at alias 0 leaves >= 8 % of a lone source aliased
+    by one TDM slot step (2π/3 between the row's halves)."""
+    from coloradar.dsp.detect import source_fit_residuals
+
+    n = np.arange(8)
+    grid = np.arange(96)                             # directions: bins of a 96-point FFT
+    steer = np.exp(2j * np.pi * np.outer(grid, n) / 96)                       # (G, M): a(u)
+
+    fine = np.exp(2j * np.pi * np.outer(np.arange(96 * 40) / 40, n) / 96)
+
+    def brute(x):
+        r1 = np.min(np.linalg.norm(x) ** 2 - np.abs(np.conj(fine) @ x) ** 2 / 8)
+        r2 = np.inf
+        for i in range(grid.size):
+            for j in range(i + 1, grid.size):
+                a = np.stack([steer[i], steer[j]], axis=1)
+                c, *_ = np.linalg.lstsq(a, x, rcond=None)
+                r2 = min(r2, np.linalg.norm(x - a @ c) ** 2)
+        return r1, r2
+
+    g = np.random.default_rng(4)
+    xs = []
+    for _ in range(3):                       # two sources 30 degrees apart, on the grid, noise
+        i = g.integers(10, 50)
+        j = i + 16
+        xs.append(steer[i] + np.exp(2j * np.pi * g.random()) * steer[j]
+                  + 0.05 * (g.standard_normal(8) + 1j * g.standard_normal(8)))
+    step = np.exp(2j * np.pi / 3 * (n >= 4))
+    aliased = [steer[k] * step for k in (20, 48, 70)]
+    r1, r2 = source_fit_residuals(np.array(xs + aliased), n, 96, grid)
+    for k, x in enumerate(xs + aliased):
+        b1, b2 = brute(x)
+        assert abs(r1[k] - b1) <= 2e-4 * np.linalg.norm(x) ** 2, (r1[k], b1)
+        assert r2[k] >= b2 * (1 - 1e-4)
+        if k < len(xs):
+            assert r2[k] <= b2 * 1.05 + 1e-6
+        else:
+            assert b2 >= 0.08 * np.linalg.norm(x) ** 2

@@ -7,6 +7,16 @@ channel, the reflector's (fractional) range bin ``f[t, r]`` (≈ 51) and the com
 
     A_fcal[n] = A[n] · exp(−j2π (f[t,r] − f[0,0]) · (S/S_cal)·(fs_cal/fs) · n / Ns)
     A_pcal    = A_fcal · P[0,0] / P[t,r]
+
+Near field. The reflector is in the array's near field (the cascade's 16 cm aperture has its
+Fraunhofer distance near 15 m), so ``P`` holds the hardware's phases *and* the reflector's
+spherical-wave phases: the calibration focuses every channel at the reflector's range
+``R0``. :meth:`PhaseFrequencyCalib.reference_range` gives ``R0`` from the peak bins
+(``mean f · c·fs_cal/(2·S_cal·Ns)``: the release's file, 51.2 of 256 bins of 5.93 cm, 3.04 m),
+for processing that focuses relative to it (docs/dsp.md, "Near field"). A calibration whose
+phases carry no such term (the simulator's: its far-field frames have none) says so with
+``near_field=False``, written as the coloradar key ``"nearFieldPhases": false`` (absent in
+the dataset's files, which mean True).
 """
 
 from __future__ import annotations
@@ -19,6 +29,7 @@ import numpy as np
 
 from ..errors import CalibrationError
 from ._parse import check_finite, readonly
+from .waveform import SPEED_OF_LIGHT
 
 __all__ = ["PhaseFrequencyCalib", "format_phase_frequency_calib", "parse_phase_frequency_calib"]
 
@@ -35,12 +46,17 @@ class PhaseFrequencyCalib:
         complex128 ``(tx, rx)``: the reflector's complex response per channel.
     slope, sample_rate
         Chirp slope [Hz/s] and sampling rate [Hz] of the calibration capture.
+    near_field
+        True (the dataset's files): the phases were measured on a reflector on boresight at the
+        range of the peak bins, so they carry its near-field phases (:meth:`reference_range`).
+        False: they carry none (a calibration made for far-field frames, as the simulator's).
     """
 
     frequency: np.ndarray
     phase: np.ndarray
     slope: float
     sample_rate: float
+    near_field: bool = True
 
     def __post_init__(self) -> None:
         f = readonly(np.asarray(self.frequency, dtype=np.float64))
@@ -68,6 +84,23 @@ class PhaseFrequencyCalib:
         """``P[0,0] / P[t,r]``: the complex factor that aligns each channel to the reference."""
         return self.phase[0, 0] / self.phase
 
+    def reference_range(self, num_samples: int) -> float | None:
+        """Range [m] of the calibration's reflector, whose near-field phases the phases carry.
+
+        The mean peak bin times the capture's range-bin width ``c·fs_cal/(2·S_cal·Ns)``, with
+        ``Ns`` = ``num_samples`` the capture's FFT size (the frame's: the frequency correction
+        assumes the same, :func:`coloradar.dsp.cube.phase_frequency_factors`). The mean over
+        channels measures the range from the virtual array's phase centre (each channel sees
+        its pair's mean distance), plus the hardware's common delay (a few cm: ~1 % of the
+        near-field phases, which scale as 1/R0). None when :attr:`near_field` is False.
+        """
+        if not self.near_field:
+            return None
+        if num_samples < 1:
+            raise CalibrationError(f"reference_range: num_samples must be >= 1, got {num_samples}")
+        width = SPEED_OF_LIGHT * self.sample_rate / (2.0 * self.slope * num_samples)
+        return float(np.mean(self.frequency) * width)
+
 
 def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.txt"
                                 ) -> PhaseFrequencyCalib:
@@ -80,6 +113,7 @@ def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.tx
         freq = np.asarray(c["frequencyCalibrationMatrix"], dtype=np.float64).ravel()
         ph = np.asarray(c["phaseCalibrationMatrix"], dtype=np.float64).ravel()
         slope, fs = float(c["frequencySlope"]), float(c["samplingRate"])
+        near = c.get("nearFieldPhases", True)
     except json.JSONDecodeError as exc:
         raise CalibrationError(f"{name}: not valid JSON ({exc})") from None
     except (KeyError, TypeError, ValueError) as exc:
@@ -88,6 +122,8 @@ def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.tx
     if freq.size != ntx * nrx or ph.size != 2 * ntx * nrx:
         raise CalibrationError(f"{name}: expected {ntx * nrx} frequency and {2 * ntx * nrx} phase "
                                f"values for {ntx} tx x {nrx} rx, found {freq.size} and {ph.size}")
+    if not isinstance(near, bool):
+        raise CalibrationError(f"{name}: nearFieldPhases must be true or false, got {near!r}")
     check_finite(freq, name, "frequencyCalibrationMatrix")
     check_finite(ph, name, "phaseCalibrationMatrix")
     for key, v, lo, hi in (("frequencySlope", slope, 1e9, 1e16), ("samplingRate", fs, 1e4, 1e9)):
@@ -95,7 +131,7 @@ def parse_phase_frequency_calib(text: str, name: str = "phase_frequency_calib.tx
             raise CalibrationError(f"{name}: {key} = {float(v):g} is not physically sensible; expected "
                                    f"a finite value in [{lo:g}, {hi:g}]")
     phase = (ph[0::2] + 1j * ph[1::2]).reshape(ntx, nrx)
-    return PhaseFrequencyCalib(freq.reshape(ntx, nrx), phase, slope, fs)
+    return PhaseFrequencyCalib(freq.reshape(ntx, nrx), phase, slope, fs, near_field=near)
 
 
 def format_phase_frequency_calib(c: PhaseFrequencyCalib) -> str:
@@ -103,8 +139,11 @@ def format_phase_frequency_calib(c: PhaseFrequencyCalib) -> str:
     ph = np.empty(c.phase.size * 2)
     ph[0::2] = c.phase.real.ravel()
     ph[1::2] = c.phase.imag.ravel()
-    return json.dumps({"antennaCalib": {
+    body: dict[str, object] = {
         "numTx": c.num_tx, "numRx": c.num_rx, "frequencySlope": c.slope,
         "samplingRate": c.sample_rate,
         "frequencyCalibrationMatrix": c.frequency.ravel().tolist(),
-        "phaseCalibrationMatrix": ph.tolist()}}) + "\n"
+        "phaseCalibrationMatrix": ph.tolist()}
+    if not c.near_field:
+        body["nearFieldPhases"] = False                 # coloradar's key (module docstring)
+    return json.dumps({"antennaCalib": body}) + "\n"

@@ -80,6 +80,16 @@ class RadarCalib:
         return self.waveform.frame_shape
 
     @property
+    def near_field_reference(self) -> float | None:
+        """Range [m] at which the channel calibration focuses the array: the reflector of the
+        phase/frequency calibration when its phases carry that reflector's near-field phases
+        (:meth:`PhaseFrequencyCalib.reference_range`), else None (no calibration, or phases
+        without a near-field term). Processing focuses relative to it (docs/dsp.md)."""
+        if self.phase_frequency is None:
+            return None
+        return self.phase_frequency.reference_range(self.waveform.num_samples)
+
+    @property
     def heatmap_shape(self) -> tuple[int, int, int]:
         """``(el, az, range)`` shape of one heatmap channel."""
         return self.heatmap.shape

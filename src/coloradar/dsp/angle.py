@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
+from ..errors import SettingsError
 from .array import AngleGrid, beamform
 
 __all__ = [
@@ -316,6 +317,11 @@ class NearField:
     raised sidelobes that look like further targets). Multiplying element ``m`` by
     ``exp(−jk·q_m)`` focuses the beam at ``(ρ, u)``.
 
+    A channel calibration measured on a reflector on boresight at ``R0`` (the cascade's) has
+    already removed that reflector's phases ``k·q_m(R0, x̂)`` from every frame: the frames
+    carry ``q(ρ, u) − q(R0, x̂)``, and the focusing is relative, ``exp(−jk(q_m − q_m(R0, x̂)))``
+    (one constant factor per element on top of the absolute focusing).
+
     Parameters
     ----------
     tx, rx
@@ -323,19 +329,40 @@ class NearField:
         relative to the phase centre (radar frame, signs applied).
     wavenumber
         ``2π f_c / c`` [rad/m].
+    reference
+        ``R0`` [m]: range of the calibration's boresight reflector whose near-field phases the
+        calibration removed (:attr:`coloradar.calib.RadarCalib.near_field_reference`); None:
+        absolute focusing (frames whose channels carry the full spherical phases).
     """
 
-    def __init__(self, tx: np.ndarray, rx: np.ndarray, wavenumber: float) -> None:
+    def __init__(self, tx: np.ndarray, rx: np.ndarray, wavenumber: float,
+                 reference: float | None = None) -> None:
         self.tx = np.asarray(tx, dtype=np.float64)
         self.rx = np.asarray(rx, dtype=np.float64)
         self.wavenumber = float(wavenumber)
+        self.reference = None if reference is None else float(reference)
         self._sq = (self.tx**2).sum(axis=1) + (self.rx**2).sum(axis=1)          # (M,)
+        self._ref: np.ndarray | None = None
+        if self.reference is not None:
+            if not self.reference > 0:
+                raise SettingsError(f"NearField reference must be > 0 m, got {reference!r}")
+            x = np.array([[1.0, 0.0, 0.0]])
+            self._ref = np.conj(self.focus(x, np.array([self.reference]), absolute=True))
 
-    def focus(self, unit: np.ndarray, rng: np.ndarray) -> np.ndarray:
-        """complex64 ``(M, K)``: ``exp(−jk·q_m)`` for directions ``unit`` ``(K, 3)`` and
-        ranges ``rng`` ``(K,)`` [m] from the phase centre."""
+    def focus(self, unit: np.ndarray, rng: np.ndarray, absolute: bool = False) -> np.ndarray:
+        """complex64 ``(M, K)``: ``exp(−jk·(q_m − q_m(R0, x̂)))`` for directions ``unit``
+        ``(K, 3)`` and ranges ``rng`` ``(K,)`` [m] from the phase centre (``absolute`` or no
+        reference: ``exp(−jk·q_m)``)."""
         u = np.asarray(unit, dtype=np.float64)
         q = (self._sq[:, None] - np.einsum("mi,ki->mk", self.tx, u) ** 2
              - np.einsum("mi,ki->mk", self.rx, u) ** 2) \
             / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))[None, :]
-        return np.exp(-1j * self.wavenumber * q).astype(np.complex64)
+        # phases of a few radians: float32 (complex64 output) is exact enough and halves the work
+        ph = (self.wavenumber * q).astype(np.float32)
+        out = np.empty(ph.shape, dtype=np.complex64)
+        np.cos(ph, out=out.real)
+        np.sin(ph, out=out.imag)
+        np.negative(out.imag, out=out.imag)
+        if self._ref is not None and not absolute:
+            out *= self._ref
+        return out

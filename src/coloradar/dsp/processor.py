@@ -60,7 +60,14 @@ from .cfar import (
     power_correlation,
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
-from .detect import Detections, channel_noise, local_maxima, sidelobe_envelope, sidelobe_pairs
+from .detect import (
+    Detections,
+    channel_noise,
+    local_maxima,
+    sidelobe_envelope,
+    sidelobe_pairs,
+    source_fit_residuals,
+)
 from .heatmap import ENGINES, heatmap_from_elements, resolve_engine
 from .tdm import alias_hypotheses, alias_phase, overlap_pairs, tdm_phase
 from .windows import WINDOWS, WindowName, coherent_window, window
@@ -134,9 +141,9 @@ class ProcessingSettings:
         angles compensated for the folded Doppler).
     alias_margin_db
         Radars without overlapping virtual pairs (the single chip) choose the Doppler alias
-        by the highest beam peak; another hypothesis must beat the folded one by this margin
-        [dB] (two sources in one cell can favour a wrong one by ~1 dB; a wrong hypothesis
-        defocuses a lone source by several).
+        by a model selection on the filled row (one or two sources under each hypothesis,
+        :meth:`RadarProcessor._choose_alias`); another hypothesis must explain this margin
+        [dB] more power than the folded one.
     heatmap_unwrap
         Heatmaps with disambiguated Doppler: cells that pass the CFAR are compensated for
         their best alias hypothesis before the angle FFT, and channel 1 carries the unwrapped
@@ -176,11 +183,14 @@ class ProcessingSettings:
         arrays: calibration residue, mutual coupling).
     near_field
         Focus beams at the detection's range (:class:`~coloradar.dsp.angle.NearField`): the
-        cascade's aperture is in its near field over the whole processed range. Off by
-        default: a calibration measured on a near reflector (the release's cascade file: a
-        reflector at ≈ 3.0 m, from its bins) already focuses every channel at that range,
-        and focusing again would add its phases twice (docs/dsp.md, "Near field"). On for
-        frames whose calibration carries no near-field phases (simulated frames).
+        cascade's aperture is in its near field over the whole processed range. ``"auto"``
+        (default): where the calibration focuses the channels at its reflector's range
+        (:attr:`~coloradar.calib.RadarCalib.near_field_reference`: the release's cascade
+        file, ≈ 3.0 m), focus relative to it, ``exp(−jk(q(ρ) − q(R0)))``; where it does not
+        (no phase calibration, or one marked far-field as the simulator's), no focusing.
+        True: always focus (relative to the calibration's reflector when it has one,
+        absolute when not: spherical-wave frames without a near-field calibration). False:
+        plane-wave beams (docs/dsp.md, "Near field").
     phase_centre
         Points from the virtual array's phase centre (True: the physics of a real array, whose
         range FFT and beams measure range and direction from it; the point is that position
@@ -240,7 +250,7 @@ class ProcessingSettings:
     angle_pfa: float = 1e-3
     angle_refine: bool = True
     angle_dynamic_range_db: float = 20.0
-    near_field: bool = False
+    near_field: bool | Literal["auto"] = "auto"
     phase_centre: bool = True
     angle_method: AngleMethod = "fft"
     angle_oversample: int = 2
@@ -254,6 +264,7 @@ class ProcessingSettings:
                    "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
                    "noise_weighting": NOISE_WEIGHTINGS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1), "engine": ENGINES}
+        choices["near_field"] = (True, False, "auto")
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
                 raise SettingsError(f"{name} = {getattr(self, name)!r}; expected one of "
@@ -296,6 +307,12 @@ class ProcessingSettings:
                                 f"got {text!r}")
         default = defaults[name]
         try:
+            if name == "near_field":                     # a flag or "auto"
+                if value.lower() == "auto":
+                    return name, "auto"
+                if value.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError
+                return name, value.lower() in ("true", "1", "yes")
             if value.lower() == "none" and default is None:
                 return name, None
             if isinstance(default, bool):
@@ -470,10 +487,20 @@ class RadarProcessor:
                                  * dg.el_sines[None, :]).astype(np.complex64)
         _, counts = np.unique(dg.el_pos, return_counts=True)
         self._row_noise = float(dg.num_elements / counts.max())
+        # Doppler alias search without overlapping pairs: one- and two-source fits of the
+        # filled row under each hypothesis (_choose_alias); a second source must explain
+        # more than noise reaches in the best of the row's ~M_row beams at angle_pfa.
+        self._row_sel = dg.el_pos == rows_el[np.argmax(counts)]
+        self._row_bins = dg.az_read[self._visible_az]                  # the row beam's grid
+        self._alias_penalty = float(np.log(self._row_sel.sum() / s.angle_pfa))
         tx, rx = pair_antennas(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
         c_true = phase_centre(self.calib.antenna, s.azimuth_sign, s.elevation_sign)
+        # Near field: relative to the range at which the calibration focused the channels.
+        ref = self.calib.near_field_reference
+        self._focus = (ref is not None if s.near_field == "auto" else bool(s.near_field))
         self._near = NearField(tx - c_true, rx - c_true,
-                               2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT)
+                               2.0 * np.pi * w.center_frequency / SPEED_OF_LIGHT,
+                               reference=ref if s.phase_frequency_calibration else None)
         # The last processed range bin: a tone within half a bin of it gives at most this
         # power ratio to the bin before (window main lobe); beyond it, more.
         self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
@@ -481,9 +508,10 @@ class RadarProcessor:
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
-        used with the numba engine for far-field beams (near-field focusing stays numpy)."""
-        s, dg = self.settings, self.detection_grid
-        if self._engine != "numba" or s.near_field:
+        used with the numba engine; near-field focusing multiplies their inputs and outputs
+        (a phase per element and detection), as on the numpy path."""
+        dg = self.detection_grid
+        if self._engine != "numba":
             return None
         from . import _kernels
         nrx = self.calib.frame_shape[1]
@@ -653,13 +681,16 @@ class RadarProcessor:
         hyps = self._aliases
         if hyps.size < 2:
             return self._heatmap(rd)
-        stat, _, looks, _ = self._detection_map(rd)
-        mask, _ = self._cfar_mask(stat, looks)
+        stat, _, looks, sig2 = self._detection_map(rd)
+        mask, noise = self._cfar_mask(stat, looks)
         d, r = np.nonzero(mask)
         if d.size == 0:
             return self._heatmap(rd)
         nd = rd.shape[2]
-        alias, _ = self._choose_alias(rd[:, :, d, r], (d - nd // 2).astype(np.float64))
+        elem_noise = (noise[d, r] * self._beam_noise_factor(sig2)
+                      * self.detection_grid.num_elements)
+        alias, _ = self._choose_alias(rd[:, :, d, r], (d - nd // 2).astype(np.float64),
+                                      elem_noise)
         assert alias is not None
         moved = alias != 0
         d, r, alias = d[moved], r[moved], alias[moved]
@@ -810,7 +841,11 @@ class RadarProcessor:
             # bin-centre compensation, then the fractional remainder
             vecs = vecs * self._tdm_at(d)
             vecs = vecs * tdm_phase(ntx, d_ref - d, nd)[:, None, :]
-        alias, spec = self._choose_alias(vecs, k_signed)
+        # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
+        # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
+        beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
+        alias, spec = self._choose_alias(vecs, k_signed,
+                                         beam_noise * self.detection_grid.num_elements)
         if alias is not None:
             vecs = vecs * alias_phase(ntx, alias)[:, None, :]
         vectors = combine_channels(vecs, self.calib.antenna.virtual, s.overlap).T  # (K, M)
@@ -824,9 +859,6 @@ class RadarProcessor:
             snaps = combine_channels(snaps, self.calib.antenna.virtual, s.overlap)
             spec = capon_spectrum(self.detection_grid, snaps.transpose(2, 1, 0), vectors,
                                   s.capon_loading, workers=s.workers)
-        # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
-        # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
-        beam_noise = noise[d, r] * self._beam_noise_factor(sig2)
         floor = self._angle_floor * beam_noise
         rho_cell = np.maximum(r, 1) * self.range_bin_width
         rel = self._angle_dynamic if s.multi_peak else np.inf
@@ -841,7 +873,8 @@ class RadarProcessor:
             fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
                                        prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
             uy = 2.0 * (fa - na // 2) / (na * self.detection_grid.rho)
-            if self._beam_kernels is not None:
+            if self._beam_kernels is not None and not self._focus:
+                # (focused beams: the bound's row sums do not hold, every peak is searched)
                 # Secondary peaks get their elevation in _resolve_peaks once their cell's
                 # strongest source is known (most are its sidelobes and need none): NaN here.
                 lead = np.r_[True, ci[1:] != ci[:-1]] if ci.size else np.zeros(0, dtype=bool)
@@ -916,9 +949,11 @@ class RadarProcessor:
         if kb is not None:
             w = np.empty((self.detection_grid.num_elements, np.size(uy)), dtype=np.complex64)
             kb["k"].steer_columns(kb["ca"], kb["cb"], kb["az"], kb["el"], _f64(uy), _f64(uz), w)
+            if self._focus:
+                w *= self._near.focus(sines_to_unit(uy, uz), rho)
             return w
         w = steering(self.detection_grid, uy, uz)
-        if self.settings.near_field:
+        if self._focus:
             w = w * self._near.focus(sines_to_unit(uy, uz), rho)
         return w
 
@@ -951,12 +986,14 @@ class RadarProcessor:
         def newton(xv: np.ndarray, uy0: np.ndarray, uz0: np.ndarray, rr: np.ndarray):
             kb = self._beam_kernels
             if kb is not None:
+                if self._focus:
+                    xv = xv * self._near.focus(sines_to_unit(uy0, uz0), rr).T
                 out = np.empty((3, np.size(uy0)))
                 kb["k"].newton_refine(_c64(xv), kb["ca"], kb["cb"], kb["az"], kb["el"],
                                       _f64(uy0), _f64(uz0), step[0], step[1], 2, True, out[0],
                                       out[1], out[2])
                 return out[0], out[1], out[2]
-            if not self.settings.near_field:
+            if not self._focus:
                 return newton_refine(g, xv, uy0, uz0, step)
             f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
             return newton_refine(g, xv * f, uy0, uz0, step)
@@ -1120,6 +1157,9 @@ class RadarProcessor:
             return np.zeros(0), np.zeros(0)
         kb = self._beam_kernels
         if kb is not None:
+            if self._focus:
+                # focused at elevation 0, as the numpy path's azimuth steering below
+                x = x * self._near.focus(sines_to_unit(uy, np.zeros(uy.size)), rho).T
             out = np.empty((2, uy.size))
             kb["k"].elevation_search(_c64(x), kb["ca"], kb["az"], kb["row"], kb["row_steer"],
                                      kb["el_sines"], _f64(uy), float(g.rho), out[0], out[1])
@@ -1273,13 +1313,26 @@ class RadarProcessor:
         keep[pi[explained]] = False
         return keep
 
-    def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray
+    def _choose_alias(self, vecs: np.ndarray, k_signed: np.ndarray,
+                      noise: np.ndarray | None = None
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`); the second value is
         None (kept for callers).
 
-        ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``.
+        ``vecs``: complex ``(tx, rx, K)`` compensated at the folded Doppler ``k_signed``;
+        ``noise``: float ``(K,)``, the mean noise power per virtual element of each
+        detection (None: radars without overlapping pairs score by the row beam's peak).
         Returns ``(None, None)`` when the search is off.
+
+        Without overlapping pairs the choice is a model selection on the filled row: each
+        hypothesis ``m`` is fitted with one source and with two (:func:`~coloradar.dsp.
+        detect.source_fit_residuals`), the two-source fit charged ``ln(M_row/angle_pfa)``
+        noise powers (what the best of the row's beams reaches on noise alone at
+        ``angle_pfa``), and the hypothesis whose better model leaves the least wins. One
+        aliased source is no pair of sources at another alias (the best such pair leaves
+        8 % of its power on the single chip's 8-element row), and two sources in one cell
+        are no aliased single source (≥ 38 % left at 30° apart), so both are told apart
+        where the scorer by peak confused them (docs/dsp.md).
         """
         hyps = self._aliases
         if hyps.size < 2:
@@ -1302,15 +1355,26 @@ class RadarProcessor:
                 kk = ks.stop - k0
                 cand = vecs[:, :, ks, None] * ph[:, None, None, :]             # (tx, rx, k, H)
                 el = combine_channels(cand, self.calib.antenna.virtual, self.settings.overlap)
-                # Beam of the filled azimuth row: a wrong hypothesis puts a phase step
-                # between the TX blocks along it and defocuses it (no elevation ghosts).
-                prof = row_profile(g, el.reshape(el.shape[0], kk * hyps.size).T,
-                                   workers=self.settings.workers)
-                prof = np.where(self._visible_az[None], prof, 0.0)
-                sc = prof.reshape(kk, hyps.size, g.num_az).max(axis=2)
-                # Two sources in one cell can make a wrong hypothesis' beam peak a little
-                # higher than the right one's (a wrong one defocuses a lone source by
-                # several dB): the folded hypothesis keeps a small margin.
+                # The filled azimuth row: a wrong hypothesis puts a phase step between the TX
+                # blocks along it and defocuses it (no elevation ghosts).
+                if noise is not None:
+                    row = el[self._row_sel].reshape(-1, kk * hyps.size).T       # (k·H, M_row)
+                    pen = np.repeat(self._alias_penalty * noise[ks], hyps.size)
+                    args = (row, g.az_pos[self._row_sel], g.n_az, self._row_bins)
+                    rss1, _ = source_fit_residuals(*args, fit=np.zeros(row.shape[0], bool))
+                    # Where the best one-source fit leaves no more than a second source is
+                    # charged, no two-source fit can win: those detections skip it.
+                    need = rss1.reshape(kk, hyps.size).min(axis=1) > pen[::hyps.size]
+                    rss1, rss2 = source_fit_residuals(*args, fit=np.repeat(need, hyps.size))
+                    left = np.minimum(rss1, rss2 + pen)
+                    # power explained by the hypothesis' better model (same |x|² for all)
+                    sc = (np.sum(np.abs(row) ** 2, axis=1) - left).reshape(kk, hyps.size)
+                else:
+                    prof = row_profile(g, el.reshape(el.shape[0], kk * hyps.size).T,
+                                       workers=self.settings.workers)
+                    prof = np.where(self._visible_az[None], prof, 0.0)
+                    sc = prof.reshape(kk, hyps.size, g.num_az).max(axis=2)
+                # (optional margin for the folded hypothesis, alias_margin_db)
                 sc = np.where(hyps[None, :] == 0, sc, sc * self._alias_margin)
                 sc = np.where(allowed[ks], sc, -np.inf)
                 score[ks] = sc

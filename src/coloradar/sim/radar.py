@@ -213,7 +213,10 @@ def make_channel_errors(calib: RadarCalib, rng: np.random.Generator,
     delays per channel, as in the real file) and random phases. Amplitudes are a TX gain times
     an RX gain times a small residual (log-normal), scaled so that the largest over the
     smallest is about ``gain_spread`` (the real file's amplitudes, 5.0e3 … 3.4e4, spread 6.8×
-    and are nearly rank one); slope and sampling rate are the waveform's.
+    and are nearly rank one); slope and sampling rate are the waveform's. Marked
+    ``near_field=False``: the simulator's frames are far-field (:mod:`.radar_if`), so the
+    errors it imposes and this calibration removes hold no reflector's near-field phases, and
+    processing does not focus (``near_field="auto"``; docs/dsp.md, "Near field").
     """
     w = calib.waveform
     shape = (w.num_tx, w.num_rx)
@@ -224,7 +227,8 @@ def make_channel_errors(calib: RadarCalib, rng: np.random.Generator,
     if gain_spread > 1.0 and np.ptp(log_amp) > 0:
         log_amp = log_amp * (np.log(gain_spread) / np.ptp(log_amp))
     amp = 1.0e4 * np.exp(log_amp - log_amp.mean())
-    return PhaseFrequencyCalib(np.round(freq, 4), amp * phase, w.slope, w.sample_rate)
+    return PhaseFrequencyCalib(np.round(freq, 4), amp * phase, w.slope, w.sample_rate,
+                               near_field=False)
 
 
 def tx_gains(errors: PhaseFrequencyCalib) -> np.ndarray:
