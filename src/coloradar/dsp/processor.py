@@ -1360,12 +1360,20 @@ class RadarProcessor:
                 if noise is not None:
                     row = el[self._row_sel].reshape(-1, kk * hyps.size).T       # (k·H, M_row)
                     pen = np.repeat(self._alias_penalty * noise[ks], hyps.size)
-                    args = (row, g.az_pos[self._row_sel], g.n_az, self._row_bins)
-                    rss1, _ = source_fit_residuals(*args, fit=np.zeros(row.shape[0], bool))
-                    # Where the best one-source fit leaves no more than a second source is
-                    # charged, no two-source fit can win: those detections skip it.
-                    need = rss1.reshape(kk, hyps.size).min(axis=1) > pen[::hyps.size]
-                    rss1, rss2 = source_fit_residuals(*args, fit=np.repeat(need, hyps.size))
+                    ok = allowed[ks].reshape(-1)
+
+                    def need(rss1: np.ndarray, kk: int = kk, pen: np.ndarray = pen,
+                             ok: np.ndarray = ok) -> np.ndarray:
+                        # Where the best one-source fit leaves no more than a second source
+                        # is charged, no two-source fit can win: those detections skip it, as
+                        # do the hypotheses out of the unwrap range (their score is -inf).
+                        lowest = rss1.reshape(kk, hyps.size).min(axis=1)
+                        return np.repeat(lowest > pen[::hyps.size], hyps.size) & ok
+
+                    kern = (self._beam_kernels["k"].source_pairs
+                            if self._beam_kernels is not None else None)
+                    rss1, rss2 = source_fit_residuals(row, g.az_pos[self._row_sel], g.n_az,
+                                                      self._row_bins, fit=need, kernel=kern)
                     left = np.minimum(rss1, rss2 + pen)
                     # power explained by the hypothesis' better model (same |x|² for all)
                     sc = (np.sum(np.abs(row) ** 2, axis=1) - left).reshape(kk, hyps.size)
