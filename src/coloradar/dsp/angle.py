@@ -342,27 +342,41 @@ class NearField:
         self.wavenumber = float(wavenumber)
         self.reference = None if reference is None else float(reference)
         self._sq = (self.tx**2).sum(axis=1) + (self.rx**2).sum(axis=1)          # (M,)
+        # (t·u)² + (r·u)² as a quadratic form Σ_{i≤j} c_ij·u_i·u_j of the direction: one
+        # multiply–add per term and element instead of two dot products (terms whose
+        # coefficients all vanish, e.g. those of x on a planar array, are left out)
+        self._quad = [(i, j, (1.0 if i == j else 2.0)
+                       * (self.tx[:, i] * self.tx[:, j] + self.rx[:, i] * self.rx[:, j]))
+                      for i in range(3) for j in range(i, 3)]
+        self._quad = [t for t in self._quad if np.any(t[2] != 0.0)]
         self._ref: np.ndarray | None = None
         if self.reference is not None:
             if not self.reference > 0:
                 raise SettingsError(f"NearField reference must be > 0 m, got {reference!r}")
-            x = np.array([[1.0, 0.0, 0.0]])
-            self._ref = np.conj(self.focus(x, np.array([self.reference]), absolute=True))
+            # k·q_m(R0, x̂): the reflector's phases that the calibration removed
+            xx = sum((c for i, j, c in self._quad if i == j == 0), np.zeros_like(self._sq))
+            self._ref = self.wavenumber * (self._sq - xx) / (2.0 * self.reference)
 
     def focus(self, unit: np.ndarray, rng: np.ndarray, absolute: bool = False) -> np.ndarray:
         """complex64 ``(M, K)``: ``exp(−jk·(q_m − q_m(R0, x̂)))`` for directions ``unit``
         ``(K, 3)`` and ranges ``rng`` ``(K,)`` [m] from the phase centre (``absolute`` or no
         reference: ``exp(−jk·q_m)``)."""
-        u = np.asarray(unit, dtype=np.float64)
-        q = (self._sq[:, None] - np.einsum("mi,ki->mk", self.tx, u) ** 2
-             - np.einsum("mi,ki->mk", self.rx, u) ** 2) \
-            / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))[None, :]
+        u = np.asarray(unit, dtype=np.float64).reshape(-1, 3)
+        m, k = self._sq.size, u.shape[0]
+        acc = np.zeros((m, k))
+        tmp = np.empty((m, k))
+        for i, j, c in self._quad:
+            np.multiply(c[:, None], (u[:, i] * u[:, j])[None, :], out=tmp)
+            acc += tmp
+        # −k·q = −k(|t|² + |r|² − (t·u)² − (r·u)²)/(2ρ), plus k·q(R0, x̂) when relative
+        np.subtract(self._sq[:, None], acc, out=acc)
+        acc *= (-self.wavenumber / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64),
+                                                     1e-3)))[None, :]
+        if self._ref is not None and not absolute:
+            acc += self._ref[:, None]
         # phases of a few radians: float32 (complex64 output) is exact enough and halves the work
-        ph = (self.wavenumber * q).astype(np.float32)
+        ph = acc.astype(np.float32)
         out = np.empty(ph.shape, dtype=np.complex64)
         np.cos(ph, out=out.real)
         np.sin(ph, out=out.imag)
-        np.negative(out.imag, out=out.imag)
-        if self._ref is not None and not absolute:
-            out *= self._ref
         return out
