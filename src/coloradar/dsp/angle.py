@@ -379,11 +379,11 @@ class NearField:
             return v[:, None] if transpose else v[None, :]
 
         shape = (k, self._sq.size) if transpose else (self._sq.size, k)
-        acc = np.zeros(shape, dtype=np.float32)
+        ph = np.empty(shape, dtype=np.float32)
         tmp = np.empty(shape, dtype=np.float32)
+        np.copyto(ph, per_element(self._sq))
         for i, j, c in self._quad:
-            acc += np.multiply(per_element(c), per_detection(u[:, i] * u[:, j]), out=tmp)
-        ph = np.subtract(per_element(self._sq), acc, out=acc)
+            ph -= np.multiply(per_element(c), per_detection(u[:, i] * u[:, j]), out=tmp)
         ph *= per_detection(a)
         if self._ref is not None and not absolute:
             ph += per_element(self._ref)
