@@ -21,11 +21,13 @@ the difference co-array, so the spectrum costs two small FFTs, not one quadratic
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.fft as sfft
 
 from ..errors import SettingsError
-from .array import AngleGrid, beamform
+from .array import AngleGrid, beamform, sines_to_unit
 
 __all__ = [
     "NearField",
@@ -363,12 +365,31 @@ class NearField:
         ``(K, 3)`` and ranges ``rng`` ``(K,)`` [m] from the phase centre (``absolute`` or no
         reference: ``exp(−jk·q_m)``); ``transpose``: the same as a C-contiguous ``(K, M)``."""
         u = np.asarray(unit, dtype=np.float64).reshape(-1, 3)
+        return self._focus(lambda i: u[:, i], u.shape[0], rng, absolute, transpose)
+
+    def focus_sines(self, uy: np.ndarray, uz: np.ndarray, rng: np.ndarray,
+                    transpose: bool = False) -> np.ndarray:
+        """:meth:`focus` (relative where there is a reference) at the directions of sines
+        ``(u_y, u_z)`` ``(K,)`` (as :func:`~coloradar.dsp.array.sines_to_unit`, without
+        forming the unit vectors where none is beyond the visible disc)."""
+        uy = np.asarray(uy, dtype=np.float64).reshape(-1)
+        uz = np.asarray(uz, dtype=np.float64).reshape(-1)
+        s2 = uy**2 + uz**2
+        if np.any(s2 > 1.0):
+            return self.focus(sines_to_unit(uy, uz), rng, transpose=transpose)
+        need_x = any(0 in (i, j) for i, j, _ in self._quad)
+        ux = np.sqrt(np.clip(1.0 - s2, 0.0, None)) if need_x else uy
+        comps = (ux, uy, uz)
+        return self._focus(lambda i: comps[i], uy.size, rng, False, transpose)
+
+    def _focus(self, comp: Callable[[int], np.ndarray], k: int, rng: np.ndarray,
+               absolute: bool, transpose: bool) -> np.ndarray:
+        """:meth:`focus` from the direction's components ``comp(i)`` (``(K,)`` each)."""
         # −k·q = −k(|t|² + |r|² − (t·u)² − (r·u)²)/(2ρ) (+ k·q(R0, x̂) when relative), the
         # bracket as Σ c_ij·u_i·u_j per element, in float32 (lengths of a few cm: relative
         # error ~1e-7, the complex64 output's own) at half the memory traffic of float64.
         a = (-self.wavenumber / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))
              ).astype(np.float32)
-        k = u.shape[0]
 
         def per_element(v: np.ndarray) -> np.ndarray:
             v = v.astype(np.float32)
@@ -383,7 +404,7 @@ class NearField:
         tmp = np.empty(shape, dtype=np.float32)
         np.copyto(ph, per_element(self._sq))
         for i, j, c in self._quad:
-            ph -= np.multiply(per_element(c), per_detection(u[:, i] * u[:, j]), out=tmp)
+            ph -= np.multiply(per_element(c), per_detection(comp(i) * comp(j)), out=tmp)
         ph *= per_detection(a)
         if self._ref is not None and not absolute:
             ph += per_element(self._ref)
