@@ -6,6 +6,13 @@ For each radar, on the same synthesized frames (several moving targets, noise, c
 and coupling when the calibration has them), prints the time per frame of
 
 * ``RadarProcessor.heatmap`` (default engine, and the numpy engine) and ``.pointcloud``;
+* for a radar whose real calibration holds a near reflector's phases (the cascade's), the
+  point cloud and heatmap of frames consistent with that calibration: exact spherical waves
+  (``tests/_synth.py``: ``exact_adc``) with the hardware errors behind the calibration
+  (``calibrated_hardware``), processed with the calibration as released, so that near-field
+  focusing is on as on real frames (the frames above are far-field and their calibration is
+  marked so, which leaves it off); ``near-field point cloud / heatmap`` compares that point
+  cloud with the heatmap of the frames above;
 * the **plain scipy chain** (the baseline): coupling, DC removal, calibration and windows,
   range FFT, Doppler FFT, TDM compensation, virtual array, the 2D angle FFT of the full
   elevation × azimuth grid of every range–Doppler cell, ``|·|²`` and the maximum (``argmax``)
