@@ -6,6 +6,13 @@ For each radar, on the same synthesized frames (several moving targets, noise, c
 and coupling when the calibration has them), prints the time per frame of
 
 * ``RadarProcessor.heatmap`` (default engine, and the numpy engine) and ``.pointcloud``;
+* for a radar whose real calibration holds a near reflector's phases (the cascade's), the
+  point cloud and heatmap of frames consistent with that calibration: exact spherical waves
+  (``tests/_synth.py``: ``exact_adc``) with the hardware errors behind the calibration
+  (``calibrated_hardware``), processed with the calibration as released, so that near-field
+  focusing is on as on real frames (the frames above are far-field and their calibration is
+  marked so, which leaves it off); ``near-field point cloud / heatmap`` compares that point
+  cloud with the heatmap of the frames above;
 * the **plain scipy chain** (the baseline): coupling, DC removal, calibration and windows,
   range FFT, Doppler FFT, TDM compensation, virtual array, the 2D angle FFT of the full
   elevation × azimuth grid of every range–Doppler cell, ``|·|²`` and the maximum (``argmax``)
@@ -43,6 +50,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")   # before numpy loads OpenBLAS
 
 import argparse
+import sys
 import time
 import warnings
 from dataclasses import replace
@@ -61,6 +69,8 @@ REAL_CALIB = Path(os.environ.get(
     "COLORADAR_REFERENCE_CALIB",
     Path(__file__).resolve().parents[1].parent / "shared/reference/coloradar_calib"))
 CPU_CLOCK = False
+NF_PC = "ADC -> point cloud, near field"
+NF_HM = "ADC -> heatmap, near field"
 
 
 def calibration(name: str, calib_dir: Path | None):
@@ -90,10 +100,14 @@ def calibration(name: str, calib_dir: Path | None):
     return replace(rc, coupling=coupling, phase_frequency=pf), "presets + synthetic errors"
 
 
-def frames(calib, n: int) -> list[np.ndarray]:
+def frames(calib, n: int, synth=synthesize_adc, errors=None) -> list[np.ndarray]:
+    """``n`` frames of 12 moving point targets with noise, the channel errors ``errors``
+    (default: the calibration's own) and the calibration's coupling; ``synth`` makes the
+    echoes (:func:`coloradar.sim.synthesize_adc`: far field)."""
     g = np.random.default_rng(1)
     w = calib.waveform
     coupling = coupling_signal(calib.coupling, w.num_samples)[:, :, None, :]
+    errors = calib.phase_frequency if errors is None else errors
     out = []
     for _ in range(n):
         k = 12
@@ -101,11 +115,30 @@ def frames(calib, n: int) -> list[np.ndarray]:
         az, el = g.uniform(-1.0, 1.0, k), g.uniform(-0.3, 0.3, k)
         u = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
         v = g.uniform(-0.9, 0.9, (k, 1)) * w.max_velocity * u
-        adc = synthesize_adc(calib, r[:, None] * u, v, 300.0 * r**2, noise_std=20.0, rng=g)
-        if calib.phase_frequency is not None:
-            adc = apply_channel_errors(adc, calib.phase_frequency)
+        adc = synth(calib, r[:, None] * u, v, 300.0 * r**2, noise_std=20.0, rng=g)
+        if errors is not None:
+            adc = apply_channel_errors(adc, errors)
         out.append((adc + coupling).astype(np.complex64))
     return out
+
+
+def near_field_frames(name: str, calib_dir: Path | None, n: int):
+    """Frames as real ones with a calibration measured on a near reflector: the release
+    calibration as it is (near-field phases, focusing on, docs/dsp.md) and frames of exact
+    spherical waves (tests/_synth.py ``exact_adc``) carrying the hardware's channel errors
+    behind that calibration (``calibrated_hardware``: the calibration less its reflector's
+    near-field phases). Returns ``(calib, frames)``, or None where the calibration has no
+    near-field phases (the single chip's, the presets)."""
+    if calib_dir is None or not calib_dir.is_dir():
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rc = load_calibration(calib_dir).radar(name)
+    if rc.phase_frequency is None or not rc.phase_frequency.near_field:
+        return None
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from _synth import calibrated_hardware, exact_adc
+    return rc, frames(rc, n, synth=exact_adc, errors=calibrated_hardware(rc))
 
 
 def scipy_chain_heatmap(calib, adc: np.ndarray) -> np.ndarray:
@@ -297,6 +330,12 @@ def main() -> None:
                 "ADC -> point cloud": (proc.pointcloud, fr),
                 "scipy chain heatmap (baseline)": (partial(scipy_chain_heatmap, calib), fr[:2]),
                 **ffts}
+        near = near_field_frames(name, args.calib, args.frames)
+        if near is not None:
+            proc_nf = RadarProcessor(near[0])
+            assert proc_nf._focus
+            jobs[NF_PC] = (proc_nf.pointcloud, near[1])
+            jobs[NF_HM] = (proc_nf.heatmap, near[1])
         t = interleaved(jobs, args.repeat)
         rate = max(fft_flops[k] / t[k] for k in ffts) * 1e-6          # GFLOP/s (t in ms)
         need = floor_flops(calib, proc)
@@ -321,6 +360,9 @@ def main() -> None:
               f"(goal <= 15 %)")
         print(f"  point cloud / heatmap           {t['ADC -> point cloud'] / hm:6.2f}x   "
               f"(goal <= 1)")
+        if near is not None:
+            print(f"  near-field point cloud / heatmap{t[NF_PC] / hm:6.2f}x   (goal <= 1; "
+                  f"{np.mean([len(proc_nf.pointcloud(a)) for a in near[1]]):.0f} points/frame)")
         if args.only == "all":
             detection_costs(calib, fr, args.repeat)
 

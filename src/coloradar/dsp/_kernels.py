@@ -26,7 +26,8 @@ import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
            "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "power", "prepare_chirps", "secondary_bound", "secondary_residual", "steer_columns"]
+           "power", "prepare_chirps", "secondary_bound", "secondary_residual", "source_pairs",
+           "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -839,6 +840,64 @@ def secondary_bound(x: Any, w_first: Any, first: Any, uy: Any, ca: float, az_pos
         out_bound[p] = b * b
 
 
+@numba.njit(inline="always")
+def _pair_explained(b: Any, n: int, p: int, q: int, cross: Any, m: int) -> float:  # pragma: no cover
+    """Power of vector ``n`` explained by the joint least-squares fit of sources ``p, q``:
+    ``bᴴG⁻¹b`` with ``G = [[M, c], [c*, M]]``, ``c = a_pᴴa_q`` (−inf where G is singular)."""
+    bp, bq, c = b[n, p], b[n, q], cross[q, p]
+    det = m * m - (c.real * c.real + c.imag * c.imag)
+    if not det > 1e-6 * m * m:
+        return -np.inf
+    num = (m * (bp.real * bp.real + bp.imag * bp.imag + bq.real * bq.real + bq.imag * bq.imag)
+           - 2.0 * (c * bp.conjugate() * bq).real)
+    return num / max(det, 1e-9 * m * m)
+
+
+@numba.njit(inline="always")
+def _pair_partner(b: Any, n: int, keep: int, cross: Any, gain: Any, m: int) -> int:  # pragma: no cover
+    """The direction adding most beside source ``keep``: argmax over ``g`` of
+    ``|b_g − (a_gᴴa_keep)·b_keep/M|² / a_gᴴP⊥a_g`` (first maximum, as numpy's argmax)."""
+    coef = b[n, keep] / m
+    best, arg = -np.inf, 0
+    for g in range(b.shape[1]):
+        v = b[n, g] - cross[keep, g] * coef
+        e = (v.real * v.real + v.imag * v.imag) / gain[keep, g]
+        if e > best:
+            best, arg = e, g
+    return arg
+
+
+@_jit(nogil=True)
+def source_pairs(b: Any, i1: Any, total: Any, rss1: Any, cross: Any, gain: Any, m: int,
+                 iterations: int, out: Any) -> None:  # pragma: no cover - compiled
+    """Two-source residuals of line-array vectors from their beams: alternating projection
+    from the beam peak ``i1`` and a joint polish of one grid step (the steps of
+    :func:`coloradar.dsp.detect.source_fit_residuals`, whose numpy twin they mirror).
+    ``b`` complex128 ``(N, G)`` beams ``aᴴx``; ``i1`` int64 ``(N,)``; ``total``, ``rss1``
+    float64 ``(N,)``; ``cross`` complex128 ``(G, G)`` = ``a_gᴴa_i`` at ``[i, g]``; ``gain``
+    float64 ``(G, G)``. Writes float64 ``out`` ``(N,)``: ``min(RSS₂, RSS₁)``."""
+    g_n = b.shape[1]
+    for n in range(b.shape[0]):
+        p = i1[n]
+        q = _pair_partner(b, n, p, cross, gain, m)
+        for _ in range(iterations):
+            p = _pair_partner(b, n, q, cross, gain, m)
+            q = _pair_partner(b, n, p, cross, gain, m)
+        best = _pair_explained(b, n, p, q, cross, m)
+        for _ in range(2):
+            for d1 in range(-1, 2):
+                for d2 in range(-1, 2):
+                    pp = min(max(p + d1, 0), g_n - 1)
+                    qq = min(max(q + d2, 0), g_n - 1)
+                    e = _pair_explained(b, n, pp, qq, cross, m)
+                    if e > best:
+                        p, q, best = pp, qq, e
+        r = rss1[n]
+        if np.isfinite(best):
+            r = min(max(total[n] - best, 0.0), r)
+        out[n] = r
+
+
 @_jit(nogil=True, fastmath=_FM)
 def power(values: Any, out: Any) -> None:  # pragma: no cover - compiled
     """``out[i] = re² + im²`` of complex values given as interleaved float32 ``(2N,)``;
@@ -860,4 +919,5 @@ joint_amplitudes = _Announced(joint_amplitudes)
 newton_refine = _Announced(newton_refine)
 secondary_bound = _Announced(secondary_bound)
 secondary_residual = _Announced(secondary_residual)
+source_pairs = _Announced(source_pairs)
 steer_columns = _Announced(steer_columns)

@@ -9,6 +9,7 @@ boresight, y left, z up). From a range–Doppler detection at range ``R`` and di
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -147,9 +148,76 @@ def _noise_cells(nd: int, nr: int, first_range: int, step: int) -> np.ndarray:
     return out
 
 
+@lru_cache(maxsize=16)
+def _fit_tables(pos: tuple[int, ...], fft_size: int, bins: tuple[int, ...]
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Cross patterns and gains of a line array's FFT grid (read-only, cached).
+
+    ``cross[i, g] = a_gᴴa_i`` (complex128 ``(G, G)``): the beam at ``g`` of a unit source at
+    ``i``, so that removing a source from a vector moves its beams by a table row instead of
+    an FFT; ``gain[i, g] = max(M − |a_gᴴa_i|²/M, 10⁻⁶M)`` (float64 ``(G, G)``): ``a_gᴴP⊥a_g``
+    with ``P⊥`` projecting ``a_i`` out.
+    """
+    p = np.asarray(pos, dtype=np.int64)
+    b = np.asarray(bins, dtype=np.int64)
+    steer = np.exp(2j * np.pi * np.outer(b, p) / fft_size)               # (G, M): a(u)
+    cross = steer @ steer.conj().T
+    m = p.size
+    # |a_gᴴa_h| depends on the bin difference only: one FFT of the element indicator
+    ind = np.zeros(fft_size)
+    ind[p] = 1.0
+    pattern = np.abs(sfft.fft(ind)) ** 2
+    gain = np.maximum(m - pattern[(b[None, :] - b[:, None]) % fft_size] / m, 1e-6 * m)
+    cross.setflags(write=False)
+    gain.setflags(write=False)
+    return cross, gain
+
+
+def _pair_fit_numpy(b: np.ndarray, i1: np.ndarray, total: np.ndarray, rss1: np.ndarray,
+                    cross: np.ndarray, gain: np.ndarray, m: int, iterations: int
+                    ) -> np.ndarray:
+    """Two-source residuals by alternating projection and a joint polish (the numpy twin
+    of :func:`coloradar.dsp._kernels.source_pairs`; see :func:`source_fit_residuals`)."""
+    n = b.shape[0]
+    k = np.arange(n)
+    g = cross.shape[0]
+
+    def partner(keep: np.ndarray) -> np.ndarray:
+        # beams of the vector less the kept source's fit: b − (a_gᴴa_keep)·b_keep/M
+        left = b - cross[keep] * (b[k, keep] / m)[:, None]
+        return np.argmax((left.real ** 2 + left.imag ** 2) / gain[keep], axis=1)
+
+    i2 = partner(i1)
+    for _ in range(iterations):
+        i1 = partner(i2)
+        i2 = partner(i1)
+
+    def explained(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        # joint least squares on (a_p, a_q): bᴴ G⁻¹ b, G = [[M, c], [c*, M]], c = a_pᴴa_q
+        bp, bq = b[k, p], b[k, q]
+        c = cross[q, p]
+        det = m * m - (c.real ** 2 + c.imag ** 2)
+        num = (m * (bp.real ** 2 + bp.imag ** 2 + bq.real ** 2 + bq.imag ** 2)
+               - 2.0 * np.real(c * np.conj(bp) * bq))
+        return np.where(det > 1e-6 * m * m, num / np.maximum(det, 1e-9 * m * m), -np.inf)
+
+    best = explained(i1, i2)
+    for _ in range(2):
+        for d1 in (-1, 0, 1):
+            for d2 in (-1, 0, 1):
+                p, q = np.clip(i1 + d1, 0, g - 1), np.clip(i2 + d2, 0, g - 1)
+                e = explained(p, q)
+                better = e > best
+                i1, i2, best = np.where(better, p, i1), np.where(better, q, i2), \
+                    np.where(better, e, best)
+    rss2 = np.where(np.isfinite(best), np.maximum(total - best, 0.0), rss1)
+    return np.minimum(rss2, rss1)
+
+
 def source_fit_residuals(x: np.ndarray, positions: np.ndarray, fft_size: int,
                          bins: np.ndarray, iterations: int = 2,
-                         fit: np.ndarray | None = None
+                         fit: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+                         kernel: Callable[..., None] | None = None
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Residual power of the best one-source and two-source fits of line-array vectors.
 
@@ -166,7 +234,9 @@ def source_fit_residuals(x: np.ndarray, positions: np.ndarray, fft_size: int,
     exhaustive search over all pairs).
 
     The grid is that of a zero-padded FFT: direction ``g`` is FFT bin ``bins[g]``, steering
-    ``a_g[m] = exp(j2π·bins[g]·positions[m]/fft_size)``, and every beam is one FFT.
+    ``a_g[m] = exp(j2π·bins[g]·positions[m]/fft_size)``. The vectors' beams are one FFT;
+    the beams of a vector less one source's fit follow from them and a cached table of the
+    array's cross patterns (``a_gᴴa_i``), so the projection steps need no transforms.
 
     Parameters
     ----------
@@ -181,8 +251,12 @@ def source_fit_residuals(x: np.ndarray, positions: np.ndarray, fft_size: int,
     iterations
         Rounds of alternating projection after the start.
     fit
-        bool ``(N,)``: the vectors that get the two-source fit (None: all); the others
-        get ``rss2 = rss1``.
+        bool ``(N,)``: the vectors that get the two-source fit (None: all), or a function
+        returning that mask from ``rss1`` (float64 ``(N,)``); the others get
+        ``rss2 = rss1``.
+    kernel
+        The compiled two-source fit (:func:`coloradar.dsp._kernels.source_pairs`, numba
+        engine), or None for numpy; both take the same steps in float64.
 
     Returns
     -------
@@ -196,22 +270,12 @@ def source_fit_residuals(x: np.ndarray, positions: np.ndarray, fft_size: int,
         return e, e
     pos = np.asarray(positions, dtype=np.int64)
     bins = np.asarray(bins, dtype=np.int64)
-
-    def beams(v: np.ndarray) -> np.ndarray:                            # (N, G): aᴴv
-        buf = np.zeros((v.shape[0], fft_size), dtype=np.result_type(v.dtype, np.complex64))
-        buf[:, pos] = v
-        return sfft.fft(buf, axis=1)[:, bins]
-
+    cross, gain = _fit_tables(tuple(pos.tolist()), int(fft_size), tuple(bins.tolist()))
+    buf = np.zeros((n, fft_size), dtype=np.result_type(x.dtype, np.complex64))
+    buf[:, pos] = x
+    b = sfft.fft(buf, axis=1)[:, bins]                                   # (N, G): aᴴx
     k = np.arange(n)
-    steer = np.exp(2j * np.pi * np.outer(bins, pos) / fft_size)          # (G, M): a(u)
-    # |a_gᴴa_h| depends on the bin difference only: one FFT of the element indicator
-    ind = np.zeros(fft_size)
-    ind[pos] = 1.0
-    cross = np.abs(sfft.fft(ind)) ** 2
-    gain = np.maximum(m - cross[(bins[None, :] - bins[:, None]) % fft_size] / m,
-                      1e-6 * m)                                         # (G, G): aᴴP⊥a
     total = np.sum(np.abs(x) ** 2, axis=1).astype(np.float64)
-    b = beams(x)
     pw = np.abs(b) ** 2
     i1 = np.argmax(pw, axis=1)
     # the peak between grid points (parabola through the peak and its neighbours): the grid
@@ -222,43 +286,21 @@ def source_fit_residuals(x: np.ndarray, positions: np.ndarray, fft_size: int,
     delta = np.where(curv < 0, 0.5 * (pm - pp) / np.where(curv < 0, curv, -1.0), 0.0)
     peak = np.maximum(p0, p0 - 0.25 * (pm - pp) * np.clip(delta, -0.5, 0.5))
     rss1 = np.maximum(total - peak / m, 0.0)
+    if callable(fit):
+        fit = fit(rss1)
+    sel = np.arange(n) if fit is None else np.flatnonzero(fit)
     rss2 = rss1.copy()
-    if fit is not None and not np.all(fit):
-        sel = np.flatnonzero(fit)
-        if sel.size:
-            _, rss2[sel] = source_fit_residuals(x[sel], pos, fft_size, bins, iterations)
-        return rss1, rss2
-
-    def partner(keep: np.ndarray) -> np.ndarray:
-        left = x - steer[keep] * (b[k, keep] / m)[:, None]
-        return np.argmax(np.abs(beams(left)) ** 2 / gain[keep], axis=1)
-
-    i2 = partner(i1)
-    for _ in range(iterations):
-        i1 = partner(i2)
-        i2 = partner(i1)
-
-    def explained(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        # joint least squares on (a_p, a_q): bᴴ G⁻¹ b, G = [[M, c], [c*, M]], c = a_pᴴa_q
-        bp, bq = b[k, p], b[k, q]
-        c = np.sum(np.conj(steer[p]) * steer[q], axis=1)
-        det = m * m - np.abs(c) ** 2
-        e = (m * (np.abs(bp) ** 2 + np.abs(bq) ** 2)
-             - 2.0 * np.real(c * np.conj(bp) * bq)) / np.maximum(det, 1e-9 * m * m)
-        return np.where(det > 1e-6 * m * m, e, -np.inf)
-
-    g = bins.size
-    best = explained(i1, i2)
-    for _ in range(2):
-        for d1 in (-1, 0, 1):
-            for d2 in (-1, 0, 1):
-                p, q = np.clip(i1 + d1, 0, g - 1), np.clip(i2 + d2, 0, g - 1)
-                e = explained(p, q)
-                better = e > best
-                i1, i2, best = np.where(better, p, i1), np.where(better, q, i2), \
-                    np.where(better, e, best)
-    rss2 = np.where(np.isfinite(best), np.maximum(total - best, 0.0), rss1)
-    return rss1, np.minimum(rss2, rss1)
+    if sel.size:
+        bs = np.ascontiguousarray(b[sel], dtype=np.complex128)
+        if kernel is not None:
+            out = np.empty(sel.size)
+            kernel(bs, np.ascontiguousarray(i1[sel], dtype=np.int64), total[sel], rss1[sel],
+                   cross, gain, m, iterations, out)
+            rss2[sel] = out
+        else:
+            rss2[sel] = _pair_fit_numpy(bs, i1[sel], total[sel], rss1[sel], cross, gain, m,
+                                        iterations)
+    return rss1, rss2
 
 
 def sidelobe_envelope(window: np.ndarray, fft_size: int, num_lags: int,

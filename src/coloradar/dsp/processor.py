@@ -950,11 +950,11 @@ class RadarProcessor:
             w = np.empty((self.detection_grid.num_elements, np.size(uy)), dtype=np.complex64)
             kb["k"].steer_columns(kb["ca"], kb["cb"], kb["az"], kb["el"], _f64(uy), _f64(uz), w)
             if self._focus:
-                w *= self._near.focus(sines_to_unit(uy, uz), rho)
+                w *= self._near.focus_sines(uy, uz, rho)
             return w
         w = steering(self.detection_grid, uy, uz)
         if self._focus:
-            w = w * self._near.focus(sines_to_unit(uy, uz), rho)
+            w = w * self._near.focus_sines(uy, uz, rho)
         return w
 
     def _resolve_peaks(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray, uz: np.ndarray,
@@ -987,7 +987,7 @@ class RadarProcessor:
             kb = self._beam_kernels
             if kb is not None:
                 if self._focus:
-                    xv = xv * self._near.focus(sines_to_unit(uy0, uz0), rr).T
+                    xv = xv * self._near.focus_sines(uy0, uz0, rr, transpose=True)
                 out = np.empty((3, np.size(uy0)))
                 kb["k"].newton_refine(_c64(xv), kb["ca"], kb["cb"], kb["az"], kb["el"],
                                       _f64(uy0), _f64(uz0), step[0], step[1], 2, True, out[0],
@@ -995,7 +995,7 @@ class RadarProcessor:
                 return out[0], out[1], out[2]
             if not self._focus:
                 return newton_refine(g, xv, uy0, uz0, step)
-            f = self._near.focus(sines_to_unit(uy0, uz0), rr).T          # (K, M)
+            f = self._near.focus_sines(uy0, uz0, rr, transpose=True)   # (K, M)
             return newton_refine(g, xv * f, uy0, uz0, step)
 
         primary = np.ones(ci.size, dtype=bool)
@@ -1159,7 +1159,8 @@ class RadarProcessor:
         if kb is not None:
             if self._focus:
                 # focused at elevation 0, as the numpy path's azimuth steering below
-                x = x * self._near.focus(sines_to_unit(uy, np.zeros(uy.size)), rho).T
+                x = x * self._near.focus_sines(uy, np.zeros(uy.size), rho,
+                                               transpose=True)
             out = np.empty((2, uy.size))
             kb["k"].elevation_search(_c64(x), kb["ca"], kb["az"], kb["row"], kb["row_steer"],
                                      kb["el_sines"], _f64(uy), float(g.rho), out[0], out[1])
@@ -1360,12 +1361,20 @@ class RadarProcessor:
                 if noise is not None:
                     row = el[self._row_sel].reshape(-1, kk * hyps.size).T       # (k·H, M_row)
                     pen = np.repeat(self._alias_penalty * noise[ks], hyps.size)
-                    args = (row, g.az_pos[self._row_sel], g.n_az, self._row_bins)
-                    rss1, _ = source_fit_residuals(*args, fit=np.zeros(row.shape[0], bool))
-                    # Where the best one-source fit leaves no more than a second source is
-                    # charged, no two-source fit can win: those detections skip it.
-                    need = rss1.reshape(kk, hyps.size).min(axis=1) > pen[::hyps.size]
-                    rss1, rss2 = source_fit_residuals(*args, fit=np.repeat(need, hyps.size))
+                    ok = allowed[ks].reshape(-1)
+
+                    def need(rss1: np.ndarray, kk: int = kk, pen: np.ndarray = pen,
+                             ok: np.ndarray = ok) -> np.ndarray:
+                        # Where the best one-source fit leaves no more than a second source
+                        # is charged, no two-source fit can win: those detections skip it, as
+                        # do the hypotheses out of the unwrap range (their score is -inf).
+                        lowest = rss1.reshape(kk, hyps.size).min(axis=1)
+                        return np.repeat(lowest > pen[::hyps.size], hyps.size) & ok
+
+                    kern = (self._beam_kernels["k"].source_pairs
+                            if self._beam_kernels is not None else None)
+                    rss1, rss2 = source_fit_residuals(row, g.az_pos[self._row_sel], g.n_az,
+                                                      self._row_bins, fit=need, kernel=kern)
                     left = np.minimum(rss1, rss2 + pen)
                     # power explained by the hypothesis' better model (same |x|² for all)
                     sc = (np.sum(np.abs(row) ** 2, axis=1) - left).reshape(kk, hyps.size)
