@@ -244,12 +244,12 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
     ne = g.num_el
     half = 1.0 / (ne * g.rho)
     u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
-    sq, cyy, cyz, czz, ref = proc._near_terms
+    _, cyy, cyz, czz, _ = proc._near_terms
+    foc0 = proc._near.focus_sines(uy, np.zeros(uy.size), rho, transpose=True)
     bound, top = np.empty((2, uy.size))
     kb["k"].secondary_bound_focused(x, wp, lead, uy.astype(np.float64), rho, kb["ca"],
-                                    kb["az"], kb["row"], int(kb["row"].max()) + 1, sq, cyy,
-                                    cyz, czz, ref, proc._near.wavenumber, u_grid, half, bound,
-                                    top)
+                                    kb["az"], kb["row"], int(kb["row"].max()) + 1, foc0, cyy,
+                                    cyz, czz, proc._near.wavenumber, u_grid, half, bound, top)
     m = g.num_elements
     wf = wp.astype(np.complex128)[:, lead]                      # (M, P) primary weights
     s_f = np.einsum("pm,mp->p", x.astype(np.complex128), wf) / m

@@ -841,99 +841,73 @@ def secondary_bound(x: Any, w_first: Any, first: Any, uy: Any, ca: float, az_pos
         out_bound[p] = b * b
 
 
-@numba.njit(inline="always")
-def _quad_arc(cyy: float, cyz: float, czz: float, a0: float, a1: float,
-              lo_hi: Any) -> None:  # pragma: no cover - compiled
-    # widen lo_hi[0:2] to the range of Q = cyy·y² + cyz·y·z + czz·z² over the unit-circle
-    # arc (y, z) = (cos α, sin α), a0 ≤ α ≤ a1 (a1 − a0 < 2π): Q = m + R·cos(2α − δ)
-    for a in (a0, a1):
-        y, z = math.cos(a), math.sin(a)
-        v = cyy * y * y + cyz * y * z + czz * z * z
-        lo_hi[0] = min(lo_hi[0], v)
-        lo_hi[1] = max(lo_hi[1], v)
-    mid = 0.5 * (cyy + czz)
-    rad = math.hypot(0.5 * (cyy - czz), 0.5 * cyz)
-    d = math.atan2(cyz, cyy - czz)
-    # the critical angles α_k = (δ + kπ)/2 inside [a0, a1]: k even a maximum, odd a minimum
-    k = math.ceil((2.0 * a0 - d) / math.pi)
-    while (d + k * math.pi) / 2.0 <= a1:
-        if k % 2 == 0:
-            lo_hi[1] = max(lo_hi[1], mid + rad)
-        else:
-            lo_hi[0] = min(lo_hi[0], mid - rad)
-        k += 1
-
-
 @_jit(nogil=True)
 def secondary_bound_focused(x: Any, w_first: Any, first: Any, uy: Any, rho: Any, ca: float,
-                            az_pos: Any, row: Any, n_rows: int, sq: Any, cyy: Any, cyz: Any,
-                            czz: Any, ref: Any, wavenumber: float, u_grid: float,
-                            half_step: float, out_bound: Any,
-                            out_top: Any) -> None:  # pragma: no cover - compiled
+                            az_pos: Any, row: Any, n_rows: int, foc0: Any, cyy: Any, cyz: Any,
+                            czz: Any, wavenumber: float, u_grid: float, half_step: float,
+                            out_bound: Any, out_top: Any) -> None:  # pragma: no cover
     """:func:`secondary_bound` for beams focused at range ``rho[p]`` [m] (float64 ``(P,)``).
 
     Element ``m``'s focusing phase at sines ``(u_y, u_z)`` is
-    ``θ_m = −k/(2ρ)·(sq_m − Q_m(u)) + ref_m`` with ``Q_m = cyy_m·u_y² + cyz_m·u_y·u_z +
+    ``θ_m = −k/(2ρ)·(sq_m − Q_m(u)) + ref_m``, ``Q_m = cyy_m·u_y² + cyz_m·u_y·u_z +
     czz_m·u_z²`` (:meth:`coloradar.dsp.angle.NearField.planar_terms`; directions beyond the
     visible disc scaled onto its edge): it changes with the elevation within a row, so the
-    row sums of :func:`secondary_bound` alone bound nothing. Over every elevation the search
-    can return at azimuth ``u_y`` (within ``half_step`` beyond the visible disc's edge
-    ``√(1 − u_y²)``, and ``|u_z| ≤ u_grid`` in any case) ``Q_m`` stays in ``[lo_m, hi_m]``,
-    so ``θ_m`` stays within ``Δ_m = k(hi_m − lo_m)/(4ρ)`` of ``c_m``, its value at the middle
-    ``Q_m = (lo_m + hi_m)/2``; with ``A_q`` the residual ``r`` steered in azimuth, multiplied
-    by ``exp(jc_m)`` and summed per row, and ``|e^{ja} − e^{jb}| ≤ min(|a − b|, 2)``::
+    row sums of :func:`secondary_bound` alone bound nothing. ``foc0`` complex64 ``(P, M)``
+    holds ``exp(jθ_m)`` at elevation 0 (``NearField.focus_sines(u_y, 0, ρ)``); the row sums
+    ``A_q`` take the residual ``r`` steered in azimuth and multiplied by it. Over every
+    elevation the search can return at ``u_y`` (a visible bin, ``|u_z| ≤ √(1 − u_y²)``, up
+    to ``half_step`` beyond; ``|u_z| ≤ u_grid`` in any case), the directions as focused
+    (scaled onto the disc's edge where beyond it) have ``|u_y'| ∈ [y_1, y_0]``,
+    ``y_0 = min(|u_y|, 1)`` the reference's, and ``|u_z'| ≤ z_max``, so
+    ``|Q_m(u') − Q_m(y_0, 0)| ≤ cyy_m(y_0² − y_1²) + |cyz_m|·y_0·z_max + czz_m·z_max²`` and,
+    with ``|e^{ja} − e^{jb}| ≤ |a − b|``::
 
-        |Σ_m r_m w_m(u)| / M ≤ (Σ_q |A_q| + Σ_m |r_m|·min(Δ_m + ε, 2)) / M
+        |Σ_m r_m w_m(u)| / M ≤ (Σ_q |A_q| + k/(2ρ)·Σ_m |r_m|·ΔQ_m + ε·Σ_m |r_m|) / M
 
-    at every elevation, ``ε = 1e-4`` rad covering the float32 phases of the weights. Writes
-    that bound squared (``out_bound``) and ``|s_f|²`` (``out_top``), float64 ``(P,)``.
+    at every elevation, ``ε = 1e-4`` rad covering the float32 phases of the weights and of
+    ``foc0``. The sums over ``|r_m|`` are per cell (the peaks of a cell, consecutive, share
+    ``r``): per peak only the row sums cost ``M`` operations. Writes that bound squared
+    (``out_bound``) and ``|s_f|²`` (``out_top``), float64 ``(P,)``.
     """
     p_n, m_n = x.shape
     pa = np.empty(np.max(az_pos) + 1, np.complex128)
     acc = np.empty(n_rows, np.complex128)
-    lo_hi = np.empty(2)
+    r = np.empty(m_n, np.complex128)
+    a = 0.0 + 0.0j
+    s0 = syy = syz = szz = 0.0
     for p in range(p_n):
         f = first[p]
-        a = 0.0 + 0.0j
-        for m in range(m_n):
-            a += x[p, m] * w_first[m, f]
-        a /= m_n
+        if p == 0 or f != first[p - 1]:         # a new cell: its residual and sums
+            a = 0.0 + 0.0j
+            for m in range(m_n):
+                a += x[p, m] * w_first[m, f]
+            a /= m_n
+            s0 = syy = syz = szz = 0.0
+            for m in range(m_n):
+                r[m] = x[p, m] - a * complex(w_first[m, f]).conjugate()
+                v = abs(r[m])
+                s0 += v
+                syy += v * cyy[m]
+                syz += v * abs(cyz[m])
+                szz += v * czz[m]
         out_top[p] = a.real * a.real + a.imag * a.imag
         _powers(ca, uy[p], pa)
-        # (Q_m(−u) = Q_m(u) and the elevations searched are symmetric: |u_y| will do, and
-        # the arcs below then run between angles in [−π/2, π/2] in ascending order)
+        acc[:] = 0.0
+        for m in range(m_n):
+            acc[row[m]] += r[m] * pa[az_pos[m]] * foc0[p, m]
+        # (Q_m(−u) = Q_m(u) and the elevations searched are symmetric: |u_y| will do)
         y = abs(uy[p])
         zm = math.sqrt(max(1.0 - y * y, 0.0))
-        # elevations the search returns: a visible bin (sine 0 is one where |u_y| ≤ 1) up to
-        # half a bin further; where none is visible, any bin of the grid
         u_max = min(u_grid, zm + half_step) if y * y <= 1.0 else u_grid
-        z_seg = min(zm, u_max)
-        scale = -wavenumber / (2.0 * max(rho[p], 1e-3))
-        acc[:] = 0.0
-        slack = 0.0
-        for m in range(m_n):
-            # range of Q_m over the segment (u_y, z), |z| ≤ z_seg (convex in z: czz ≥ 0) …
-            c0, c1, c2 = cyy[m] * y * y, cyz[m] * y, czz[m]
-            v0 = c0 - c1 * z_seg + c2 * z_seg * z_seg
-            v1 = c0 + c1 * z_seg + c2 * z_seg * z_seg
-            lo_hi[0] = min(v0, v1)
-            lo_hi[1] = max(v0, v1)
-            if c2 > 0.0:
-                zv = -c1 / (2.0 * c2)
-                if -z_seg <= zv <= z_seg:
-                    lo_hi[0] = min(lo_hi[0], c0 + c1 * zv + c2 * zv * zv)
-            # … and over the directions beyond the disc, scaled onto its edge: the arcs
-            # from (u_y, ±z_m) to (u_y, ±u_max) normalised
-            if u_max > zm:
-                _quad_arc(cyy[m], cyz[m], czz[m], math.atan2(zm, y), math.atan2(u_max, y),
-                          lo_hi)
-                _quad_arc(cyy[m], cyz[m], czz[m], math.atan2(-u_max, y),
-                          math.atan2(-zm, y), lo_hi)
-            th = scale * (sq[m] - 0.5 * (lo_hi[0] + lo_hi[1])) + ref[m]
-            r = (x[p, m] - a * complex(w_first[m, f]).conjugate())
-            acc[row[m]] += r * pa[az_pos[m]] * complex(math.cos(th), math.sin(th))
-            slack += abs(r) * min(abs(scale) * 0.5 * (lo_hi[1] - lo_hi[0]) + 1e-4, 2.0)
-        b = slack
+        y0 = min(y, 1.0)
+        if u_max > zm:
+            # beyond the edge: (u_y, u_z) scaled onto it, |u_y'| down to y/s at u_z = u_max
+            s1 = math.sqrt(y * y + u_max * u_max)
+            y1, z_max = y / s1, u_max / s1
+        else:
+            y1, z_max = y0, u_max
+        dev = syy * (y0 * y0 - y1 * y1) + syz * y0 * z_max + szz * z_max * z_max
+        b = wavenumber / (2.0 * max(rho[p], 1e-3)) * dev + 1e-4 * s0
         for q in range(n_rows):
             b += abs(acc[q])
         b /= m_n

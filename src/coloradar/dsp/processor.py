@@ -1119,11 +1119,12 @@ class RadarProcessor:
             ne = g.num_el
             half = 1.0 / (ne * g.rho)                   # half an elevation bin (sine)
             u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
-            sq, cyy, cyz, czz, ref = self._near_terms
+            _, cyy, cyz, czz, _ = self._near_terms
+            foc0 = self._near.focus_sines(uy, np.zeros(uy.size), rho, transpose=True)
             kb["k"].secondary_bound_focused(
                 _c64(x), wp, lead.astype(np.int64), _f64(uy), _f64(rho), kb["ca"], kb["az"],
-                kb["row"], n_rows, sq, cyy, cyz, czz, ref, self._near.wavenumber, u_grid,
-                half, bound, top)
+                kb["row"], n_rows, foc0, cyy, cyz, czz, self._near.wavenumber, u_grid, half,
+                bound, top)
         hopeless = deferred & ((bound < floor[ci]) | (bound < top * self._angle_dynamic))
         keep = ~hopeless
         uy, uz, peak, ci, x, rho, primary, deferred = (
