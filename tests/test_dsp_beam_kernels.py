@@ -231,11 +231,12 @@ def _focused_bound_case(seed: int, near: bool):
 @pytest.mark.parametrize("near", [True, False])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
-    """The bound of the focused residual beam power never falls below the exact residual
+    """The bounds of the focused residual beam power never fall below the exact residual
     ``|Σ_m r_m w_m(u)|²/M²`` (``r`` the vector less the primary's fit, ``w`` the focused
     weights, complex128, focusing phases from NearField.focus) over a fine grid of
     elevations: the visible ones at the azimuth and the ones beyond its edge the elevation
-    search can return (scaled onto the disc, as focus_sines does)."""
+    search can return (scaled onto the disc, as focus_sines does). Both bounds: the row sums
+    with the focusing's slack, and Cauchy–Schwarz (written where it already fails a test)."""
     from coloradar.dsp.array import sines_to_unit
 
     proc, x, wp, lead, uy, rho = _focused_bound_case(seed, near)
@@ -244,12 +245,21 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
     ne = g.num_el
     half = 1.0 / (ne * g.rho)
     u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
-    _, cyy, cyz, czz, _ = proc._near_terms
-    foc0 = proc._near.focus_sines(uy, np.zeros(uy.size), rho, transpose=True)
-    bound, top = np.empty((2, uy.size))
-    kb["k"].secondary_bound_focused(x, wp, lead, uy.astype(np.float64), rho, kb["ca"],
-                                    kb["az"], kb["row"], int(kb["row"].max()) + 1, foc0, cyy,
-                                    cyz, czz, proc._near.wavenumber, u_grid, half, bound, top)
+    sq, cyy, cyz, czz, ref = proc._near_terms
+    ty2, it = np.unique(proc._near.tx[:, 1] ** 2, return_inverse=True)
+    ry2, ir = np.unique(proc._near.rx[:, 1] ** 2, return_inverse=True)
+
+    def kernel(floor: float) -> tuple[np.ndarray, np.ndarray]:
+        bound, top = np.empty((2, uy.size))
+        kb["k"].secondary_bound_focused(
+            x, wp, lead, uy.astype(np.float64), rho, np.full(uy.size, floor), 0.0, kb["ca"],
+            kb["az"], kb["row"], int(kb["row"].max()) + 1, sq, cyy, cyz, czz, ref, ty2,
+            it.astype(np.int64), ry2, ir.astype(np.int64), proc._near.wavenumber, u_grid,
+            half, bound, top)
+        return bound, top
+
+    bound, top = kernel(0.0)           # nothing passes a test at 0: the row-sum bound
+    bound_cs, _ = kernel(np.inf)       # every peak below the floor: the Cauchy–Schwarz one
     m = g.num_elements
     wf = wp.astype(np.complex128)[:, lead]                      # (M, P) primary weights
     s_f = np.einsum("pm,mp->p", x.astype(np.complex128), wf) / m
@@ -266,5 +276,6 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
         w = _steering(proc, uyk, uz) * foc.astype(np.complex128)
         exact = np.abs(r[k] @ w) ** 2 / m**2
         assert exact.max() <= bound[k], (k, exact.max(), bound[k])
+        assert exact.max() <= bound_cs[k], (k, exact.max(), bound_cs[k])
         worst = max(worst, exact.max() / bound[k])
     assert worst > 0.05          # (a bound, not a blanket: some secondary comes close)

@@ -1119,12 +1119,20 @@ class RadarProcessor:
             ne = g.num_el
             half = 1.0 / (ne * g.rho)                   # half an elevation bin (sine)
             u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
-            _, cyy, cyz, czz, _ = self._near_terms
-            foc0 = self._near.focus_sines(uy, np.zeros(uy.size), rho, transpose=True)
+            sq, cyy, cyz, czz, ref = self._near_terms
+            # (cyy = t_y² + r_y²: one phase factor per TX and one per RX, not per element)
+            ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
+            ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+            # (only the deferred peaks: the primaries' bound is not used)
+            bound[:], top[:] = np.inf, 0.0
+            j = np.flatnonzero(deferred)
+            bj, tj = np.empty((2, j.size))
             kb["k"].secondary_bound_focused(
-                _c64(x), wp, lead.astype(np.int64), _f64(uy), _f64(rho), kb["ca"], kb["az"],
-                kb["row"], n_rows, foc0, cyy, cyz, czz, self._near.wavenumber, u_grid, half,
-                bound, top)
+                _c64(x[j]), wp, lead[j].astype(np.int64), _f64(uy[j]), _f64(rho[j]),
+                _f64(floor[ci[j]]), float(self._angle_dynamic), kb["ca"], kb["az"],
+                kb["row"], n_rows, sq, cyy, cyz, czz, ref, ty2, it.astype(np.int64), ry2,
+                ir.astype(np.int64), self._near.wavenumber, u_grid, half, bj, tj)
+            bound[j], top[j] = bj, tj
         hopeless = deferred & ((bound < floor[ci]) | (bound < top * self._angle_dynamic))
         keep = ~hopeless
         uy, uz, peak, ci, x, rho, primary, deferred = (
