@@ -953,11 +953,11 @@ def secondary_bound_focused(x: Any, w_first: Any, first: Any, uy: Any, rho: Any,
             ex[i] = _expj(beta * ry2[i])
         b = 0.0
         for q in range(n_rows):                  # each row's elements in turn
-            v = 0.0 + 0.0j
+            aq = 0.0 + 0.0j
             for i in range(row_start[q], row_start[q + 1]):
                 m = order[i]
-                v += re[m] * pa[az_pos[m]] * (et[it[m]] * ex[ir[m]])
-            b += math.sqrt(v.real * v.real + v.imag * v.imag)
+                aq += re[m] * pa[az_pos[m]] * (et[it[m]] * ex[ir[m]])
+            b += math.sqrt(aq.real * aq.real + aq.imag * aq.imag)
         dev = syy * (y0 * y0 - y1 * y1) + syz * y0 * z_max + szz * z_max * z_max
         b += scale * dev + 1e-4 * s0
         b /= m_n
