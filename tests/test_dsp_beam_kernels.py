@@ -8,6 +8,8 @@ the Newton steps in numpy).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -192,3 +194,88 @@ def test_point_clouds_of_both_engines_agree_with_focusing(name):
         np.testing.assert_allclose(a[:, :3], b[:, :3], atol=1e-3)
         np.testing.assert_allclose(a[:, 3], b[:, 3], rtol=2e-3)
         np.testing.assert_allclose(a[:, 4], b[:, 4], atol=1e-4)
+
+
+def _focused_bound_case(seed: int, near: bool):
+    """The focused secondary bound's inputs on the cascade (relative focusing on the
+    calibration's reflector where there is one), random vectors, directions and ranges."""
+    from _synth import REFERENCE_CALIB
+    from coloradar.calib import load_calibration
+
+    if REFERENCE_CALIB.is_dir():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")             # the real files' known defects
+            calib = load_calibration(REFERENCE_CALIB).radar("cascade")
+    else:
+        calib = preset_radar("cascade")
+    proc = RadarProcessor(calib, engine="numba", near_field=True)
+    assert proc._focus and proc._near_terms is not None
+    rng = np.random.default_rng(seed)
+    g = proc.detection_grid
+    m, n_cells, per = g.num_elements, 6, 4
+    p = n_cells * per
+    # each cell: one vector, its primary direction first, then secondaries
+    xc = (rng.normal(size=(n_cells, m)) + 1j * rng.normal(size=(n_cells, m))).astype(np.complex64)
+    x = np.repeat(xc, per, axis=0)
+    primary = np.tile(np.r_[True, np.zeros(per - 1, bool)], n_cells)
+    uy = rng.uniform(-1.0, 1.0, p)
+    uy[::7] = rng.choice([-0.999, 0.0, 0.98], uy[::7].size)     # disc edge and boresight
+    uz_p = rng.uniform(-0.6, 0.6, p)
+    rho = (rng.uniform(0.3, 3.0, p) if near else rng.uniform(10.0, 40.0, p))
+    rho = np.repeat(rho[::per], per)                            # one range per cell
+    wp = proc._steer(uy[primary], uz_p[primary], rho[primary])
+    lead = (np.cumsum(primary) - 1).astype(np.int64)
+    return proc, x, wp, lead, uy, rho
+
+
+@pytest.mark.parametrize("near", [True, False])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
+    """The bounds of the focused residual beam power never fall below the exact residual
+    ``|Σ_m r_m w_m(u)|²/M²`` (``r`` the vector less the primary's fit, ``w`` the focused
+    weights, complex128, focusing phases from NearField.focus) over a fine grid of
+    elevations: the visible ones at the azimuth and the ones beyond its edge the elevation
+    search can return (scaled onto the disc, as focus_sines does). Both bounds: the row sums
+    with the focusing's slack, and Cauchy–Schwarz (written where it already fails a test)."""
+    from coloradar.dsp.array import sines_to_unit
+
+    proc, x, wp, lead, uy, rho = _focused_bound_case(seed, near)
+    kb = proc._beam_kernels
+    g = proc.detection_grid
+    ne = g.num_el
+    half = 1.0 / (ne * g.rho)
+    u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
+    sq, cyy, cyz, czz, ref = proc._near_terms
+    ty2, it = np.unique(proc._near.tx[:, 1] ** 2, return_inverse=True)
+    ry2, ir = np.unique(proc._near.rx[:, 1] ** 2, return_inverse=True)
+
+    def kernel(floor: float) -> tuple[np.ndarray, np.ndarray]:
+        bound, top = np.empty((2, uy.size))
+        kb["k"].secondary_bound_focused(
+            x, wp, lead, uy.astype(np.float64), rho, np.full(uy.size, floor), 0.0, kb["ca"],
+            kb["az"], kb["row"], int(kb["row"].max()) + 1, sq, cyy, cyz, czz, ref, ty2,
+            it.astype(np.int64), ry2, ir.astype(np.int64), proc._near.wavenumber, u_grid,
+            half, bound, top)
+        return bound, top
+
+    bound, top = kernel(0.0)           # nothing passes a test at 0: the row-sum bound
+    bound_cs, _ = kernel(np.inf)       # every peak below the floor: the Cauchy–Schwarz one
+    m = g.num_elements
+    wf = wp.astype(np.complex128)[:, lead]                      # (M, P) primary weights
+    s_f = np.einsum("pm,mp->p", x.astype(np.complex128), wf) / m
+    np.testing.assert_allclose(top, np.abs(s_f) ** 2, rtol=1e-5)
+    r = x - s_f[:, None] * np.conj(wf.T)                         # (P, M)
+    zm = np.sqrt(np.clip(1.0 - uy**2, 0.0, None))
+    worst = 0.0
+    for k in range(uy.size):
+        u_max = min(u_grid, zm[k] + half) if uy[k] ** 2 <= 1 else u_grid
+        uz = np.linspace(-u_max, u_max, 4001)
+        uyk = np.full(uz.size, uy[k])
+        # focusing as the processor's weights: directions beyond the disc scaled onto it
+        foc = proc._near.focus(sines_to_unit(uyk, uz), np.full(uz.size, rho[k]))
+        w = _steering(proc, uyk, uz) * foc.astype(np.complex128)
+        exact = np.abs(r[k] @ w) ** 2 / m**2
+        assert exact.max() <= bound[k], (k, exact.max(), bound[k])
+        assert exact.max() <= bound_cs[k], (k, exact.max(), bound_cs[k])
+        worst = max(worst, exact.max() / bound[k])
+    assert worst > 0.05          # (a bound, not a blanket: some secondary comes close)

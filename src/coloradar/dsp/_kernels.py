@@ -26,7 +26,8 @@ import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
            "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "power", "prepare_chirps", "secondary_bound", "secondary_residual", "source_pairs",
+           "power", "prepare_chirps", "secondary_bound", "secondary_bound_focused",
+           "secondary_residual", "source_pairs",
            "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
@@ -840,6 +841,129 @@ def secondary_bound(x: Any, w_first: Any, first: Any, uy: Any, ca: float, az_pos
         out_bound[p] = b * b
 
 
+_TWO_PI = 2.0 * math.pi
+
+
+@numba.njit(inline="always")
+def _expj(t: float) -> complex:  # pragma: no cover - compiled
+    # exp(jt) without libm calls: t reduced to [−π, π], the Taylor series of exp(jt/8)
+    # (error < 1e-10 there), squared three times
+    h = (t - _TWO_PI * math.floor(t * (1.0 / _TWO_PI) + 0.5)) * 0.125
+    h2 = h * h
+    c = 1.0 - h2 * (0.5 - h2 * (1.0 / 24 - h2 * (1.0 / 720 - h2 * (1.0 / 40320))))
+    sn = h * (1.0 - h2 * (1.0 / 6 - h2 * (1.0 / 120 - h2 * (1.0 / 5040 - h2 * (1.0 / 362880)))))
+    for _ in range(3):
+        c, sn = c * c - sn * sn, 2.0 * c * sn
+    return complex(c, sn)
+
+
+@_jit(nogil=True)
+def secondary_bound_focused(x: Any, w_first: Any, first: Any, uy: Any, rho: Any, floor: Any,
+                            dyn: float, ca: float, az_pos: Any, row: Any, n_rows: int, sq: Any,
+                            cyy: Any, cyz: Any, czz: Any, ref: Any, ty2: Any, it: Any, ry2: Any,
+                            ir: Any, wavenumber: float, u_grid: float, half_step: float,
+                            out_bound: Any, out_top: Any) -> None:  # pragma: no cover
+    """:func:`secondary_bound` for beams focused at range ``rho[p]`` [m] (float64 ``(P,)``).
+
+    Element ``m``'s focusing phase at sines ``(u_y, u_z)`` is
+    ``θ_m = −k/(2ρ)·(sq_m − Q_m(u)) + ref_m``, ``Q_m = cyy_m·u_y² + cyz_m·u_y·u_z +
+    czz_m·u_z²`` (:meth:`coloradar.dsp.angle.NearField.planar_terms`; directions beyond the
+    visible disc scaled onto its edge): it changes with the elevation within a row, so the
+    row sums of :func:`secondary_bound` alone bound nothing. Here the row sums ``A_q`` take
+    the residual ``r`` steered in azimuth and multiplied by ``exp(jc_m)``, ``c_m`` the phase at
+    ``(y_0, 0)``, ``y_0 = min(|u_y|, 1)``. Over every elevation the search can return at
+    ``u_y`` (a visible bin, ``|u_z| ≤ √(1 − u_y²)``, up to ``half_step`` beyond; ``|u_z| ≤
+    u_grid`` in any case), the directions as focused (scaled onto the disc's edge where
+    beyond it) have ``|u_y'| ∈ [y_1, y_0]`` and ``|u_z'| ≤ z_max``, so
+    ``|Q_m(u') − Q_m(y_0, 0)| ≤ ΔQ_m = cyy_m(y_0² − y_1²) + |cyz_m|·y_0·z_max +
+    czz_m·z_max²`` and, with ``|e^{ja} − e^{jb}| ≤ |a − b|``::
+
+        |Σ_m r_m w_m(u)| / M ≤ (Σ_q |A_q| + k/(2ρ)·Σ_m |r_m|·ΔQ_m + ε·Σ_m |r_m|) / M
+
+    at every elevation, ``ε = 1e-4`` rad covering the float32 phases of the weights. The
+    sums over ``|r_m|`` are per cell (its peaks, consecutive, share ``r``), and so is the
+    factor ``exp(−jk·sq_m/(2ρ) + j·ref_m)`` of ``exp(jc_m)``; the rest,
+    ``exp(jk·y_0²·cyy_m/(2ρ))`` with ``cyy_m = ty2[it[m]] + ry2[ir[m]]`` (the squared y of
+    the element's TX and RX), is a product of one factor per TX and one per RX. Cheaper first:
+    Cauchy–Schwarz, ``‖r‖²/M``, per cell; where that is already below the peak's test
+    (``floor[p]``, ``dyn·|s_f|²``) it is the bound written and the row sums are skipped.
+    Writes the bound on the residual beam power (``out_bound``) and ``|s_f|²``
+    (``out_top``), float64 ``(P,)``.
+    """
+    p_n, m_n = x.shape
+    pa = np.empty(np.max(az_pos) + 1, np.complex128)
+    order = np.argsort(row, kind="mergesort")      # elements grouped by row
+    row_start = np.zeros(n_rows + 1, np.int64)
+    for m in range(m_n):
+        row_start[row[m] + 1] += 1
+    for q in range(n_rows):
+        row_start[q + 1] += row_start[q]
+    r = np.empty(m_n, np.complex128)
+    re = np.empty(m_n, np.complex128)          # r_m·exp(−jk·sq_m/(2ρ) + j·ref_m), per cell
+    et = np.empty(ty2.size, np.complex128)
+    ex = np.empty(ry2.size, np.complex128)
+    a = 0.0 + 0.0j
+    s0 = s2 = syy = syz = szz = 0.0
+    re_of = -1                                  # the cell whose factors re holds
+    for p in range(p_n):
+        f = first[p]
+        if p == 0 or f != first[p - 1]:         # a new cell: its residual and sums
+            a = 0.0 + 0.0j
+            for m in range(m_n):
+                a += x[p, m] * w_first[m, f]
+            a /= m_n
+            s0 = s2 = syy = syz = szz = 0.0
+            for m in range(m_n):
+                rm = x[p, m] - a * complex(w_first[m, f]).conjugate()
+                r[m] = rm
+                v2 = rm.real * rm.real + rm.imag * rm.imag
+                v = math.sqrt(v2)                # (not abs: hypot is slow)
+                s0 += v
+                s2 += v2
+                syy += v * cyy[m]
+                syz += v * abs(cyz[m])
+                szz += v * czz[m]
+        top = a.real * a.real + a.imag * a.imag
+        out_top[p] = top
+        cs = s2 / m_n * (1.0 + 1e-6)
+        if cs < floor[p] or cs < dyn * top:
+            out_bound[p] = cs
+            continue
+        scale = wavenumber / (2.0 * max(rho[p], 1e-3))
+        if re_of != f:                          # (the peaks of a cell share the range)
+            re_of = f
+            for m in range(m_n):
+                re[m] = r[m] * _expj(-scale * sq[m] + ref[m])
+        _powers(ca, uy[p], pa)
+        # (Q_m(−u) = Q_m(u) and the elevations searched are symmetric: |u_y| will do)
+        y = abs(uy[p])
+        zm = math.sqrt(max(1.0 - y * y, 0.0))
+        u_max = min(u_grid, zm + half_step) if y * y <= 1.0 else u_grid
+        y0 = min(y, 1.0)
+        if u_max > zm:
+            # beyond the edge: (u_y, u_z) scaled onto it, |u_y'| down to y/s at u_z = u_max
+            s1 = math.sqrt(y * y + u_max * u_max)
+            y1, z_max = y / s1, u_max / s1
+        else:
+            y1, z_max = y0, u_max
+        beta = scale * y0 * y0
+        for i in range(ty2.size):
+            et[i] = _expj(beta * ty2[i])
+        for i in range(ry2.size):
+            ex[i] = _expj(beta * ry2[i])
+        b = 0.0
+        for q in range(n_rows):                  # each row's elements in turn
+            aq = 0.0 + 0.0j
+            for i in range(row_start[q], row_start[q + 1]):
+                m = order[i]
+                aq += re[m] * pa[az_pos[m]] * (et[it[m]] * ex[ir[m]])
+            b += math.sqrt(aq.real * aq.real + aq.imag * aq.imag)
+        dev = syy * (y0 * y0 - y1 * y1) + syz * y0 * z_max + szz * z_max * z_max
+        b += scale * dev + 1e-4 * s0
+        b /= m_n
+        out_bound[p] = b * b * (1.0 + 1e-6)
+
+
 @numba.njit(inline="always")
 def _pair_explained(b: Any, n: int, p: int, q: int, cross: Any, m: int) -> float:  # pragma: no cover
     """Power of vector ``n`` explained by the joint least-squares fit of sources ``p, q``:
@@ -918,6 +1042,7 @@ elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)
 newton_refine = _Announced(newton_refine)
 secondary_bound = _Announced(secondary_bound)
+secondary_bound_focused = _Announced(secondary_bound_focused)
 secondary_residual = _Announced(secondary_residual)
 source_pairs = _Announced(source_pairs)
 steer_columns = _Announced(steer_columns)

@@ -382,6 +382,29 @@ class NearField:
         comps = (ux, uy, uz)
         return self._focus(lambda i: comps[i], uy.size, rng, False, transpose)
 
+    def planar_terms(self) -> tuple[np.ndarray, ...] | None:
+        """The focusing phase of :meth:`focus_sines` as a quadratic in the direction sines,
+        where the array is planar in y–z (no antenna off the plane x = 0: the cascade's).
+
+        Element ``m``'s phase at ``(u_y, u_z)`` and range ``ρ`` is
+        ``−k/(2ρ)·(s_m − c_yy,m·u_y² − c_yz,m·u_y·u_z − c_zz,m·u_z²) + φ_m`` (``φ_m`` the
+        reference's constant, 0 without one); for directions beyond the visible disc,
+        ``(u_y, u_z)`` scaled onto it (:func:`~coloradar.dsp.array.sines_to_unit`).
+
+        Returns
+        -------
+        tuple or None
+            ``(s, c_yy, c_yz, c_zz, φ)``, float64 ``(M,)`` each ([m²] but ``φ`` [rad]); None
+            where an antenna lies off the plane (the phase then depends on ``u_x`` too).
+        """
+        if np.any(self.tx[:, 0] != 0.0) or np.any(self.rx[:, 0] != 0.0):
+            return None
+        t, r = self.tx, self.rx
+        ref = self._ref if self._ref is not None else np.zeros_like(self._sq)
+        return (self._sq.copy(), t[:, 1]**2 + r[:, 1]**2,
+                2.0 * (t[:, 1] * t[:, 2] + r[:, 1] * r[:, 2]), t[:, 2]**2 + r[:, 2]**2,
+                np.asarray(ref, dtype=np.float64).copy())
+
     def _focus(self, comp: Callable[[int], np.ndarray], k: int, rng: np.ndarray,
                absolute: bool, transpose: bool) -> np.ndarray:
         """:meth:`focus` from the direction's components ``comp(i)`` (``(K,)`` each)."""

@@ -505,6 +505,8 @@ class RadarProcessor:
         # power ratio to the bin before (window main lobe); beyond it, more.
         self._edge_ratio = _edge_ratio(window(s.range_window, ns), self.range_fft_size)
         self._beam_kernels = self._init_beam_kernels()
+        # (focusing phase as a quadratic in the sines, for the secondary peaks' bound)
+        self._near_terms = self._near.planar_terms() if self._focus else None
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
@@ -873,8 +875,8 @@ class RadarProcessor:
             fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
                                        prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
             uy = 2.0 * (fa - na // 2) / (na * self.detection_grid.rho)
-            if self._beam_kernels is not None and not self._focus:
-                # (focused beams: the bound's row sums do not hold, every peak is searched)
+            if self._beam_kernels is not None and (not self._focus
+                                                   or self._near_terms is not None):
                 # Secondary peaks get their elevation in _resolve_peaks once their cell's
                 # strongest source is known (most are its sidelobes and need none): NaN here.
                 lead = np.r_[True, ci[1:] != ci[:-1]] if ci.size else np.zeros(0, dtype=bool)
@@ -1096,15 +1098,41 @@ class RadarProcessor:
         """Drop the secondary peaks that the residual test below rejects at every elevation
         (compiled path): its residual beam power is at most ``(Σ_q |A_q| / M)²``, ``A_q`` the
         residual's azimuth-steered sum over elevation row ``q``
-        (:func:`~coloradar.dsp._kernels.secondary_bound`); the others get their elevation
-        search now. Returns ``uy, uz, peak, ci, x, rho, primary`` of the peaks kept."""
+        (:func:`~coloradar.dsp._kernels.secondary_bound`; with focusing, plus what the
+        focusing phases' change over the elevations can add,
+        :func:`~coloradar.dsp._kernels.secondary_bound_focused`); the others get their
+        elevation search now. Returns ``uy, uz, peak, ci, x, rho, primary`` of the peaks kept."""
         kb = self._beam_kernels
         assert kb is not None
         lead = np.cumsum(primary) - 1                   # each peak's primary, among primaries
         wp = self._steer(uy[primary], uz[primary], rho[primary])
         bound, top = np.empty((2, ci.size))
-        kb["k"].secondary_bound(_c64(x), wp, lead.astype(np.int64), _f64(uy), kb["ca"], kb["az"],
-                                kb["row"], int(kb["row"].max()) + 1, bound, top)
+        n_rows = int(kb["row"].max()) + 1
+        if not self._focus:
+            kb["k"].secondary_bound(_c64(x), wp, lead.astype(np.int64), _f64(uy), kb["ca"],
+                                    kb["az"], kb["row"], n_rows, bound, top)
+        else:
+            # focused beams: each element's phase changes with the elevation within a row;
+            # the bound adds what that change can contribute over the elevations searched
+            assert self._near_terms is not None
+            g = self.detection_grid
+            ne = g.num_el
+            half = 1.0 / (ne * g.rho)                   # half an elevation bin (sine)
+            u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
+            sq, cyy, cyz, czz, ref = self._near_terms
+            # (cyy = t_y² + r_y²: one phase factor per TX and one per RX, not per element)
+            ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
+            ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+            # (only the deferred peaks: the primaries' bound is not used)
+            bound[:], top[:] = np.inf, 0.0
+            j = np.flatnonzero(deferred)
+            bj, tj = np.empty((2, j.size))
+            kb["k"].secondary_bound_focused(
+                _c64(x[j]), wp, lead[j].astype(np.int64), _f64(uy[j]), _f64(rho[j]),
+                _f64(floor[ci[j]]), float(self._angle_dynamic), kb["ca"], kb["az"],
+                kb["row"], n_rows, sq, cyy, cyz, czz, ref, ty2, it.astype(np.int64), ry2,
+                ir.astype(np.int64), self._near.wavenumber, u_grid, half, bj, tj)
+            bound[j], top[j] = bj, tj
         hopeless = deferred & ((bound < floor[ci]) | (bound < top * self._angle_dynamic))
         keep = ~hopeless
         uy, uz, peak, ci, x, rho, primary, deferred = (
