@@ -353,6 +353,8 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
     (``(num_el, num_az, range, 2)``).
     """
     nd, nr = cube.shape[1], cube.shape[2]
+    cf = cube.reshape(cube.shape[0], nd, nr).view(np.float32)     # (C, doppler, 2·range)
+    out_f = out.reshape(out.shape[0], out.shape[1], 2 * nr)        # (el, az, 2·range)
     n_az = 2 * w_r.size
     n_st, rows = steer.shape
     n_out = out.shape[1]
@@ -413,6 +415,11 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
                             src_i[q, 2 * p, t] = gr * v.imag + gi * v.real
                             src_r[q, 2 * p + 1, t] = hr * v.real - hi * v.imag
                             src_i[q, 2 * p + 1, t] = hr * v.imag + hi * v.real
+                    elif n == LANES:                # full block: a fixed trip count
+                        for t in range(LANES):
+                            vr, vi = cf[c, d, 2 * (r0 + t)], cf[c, d, 2 * (r0 + t) + 1]
+                            src_r[q, p, t] = gr * vr - gi * vi
+                            src_i[q, p, t] = gr * vi + gi * vr
                     else:
                         for t in range(n):
                             v = cube[c, d, r0 + t]
@@ -434,6 +441,16 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
                                                                            el_minus)
             for e in range(n_st):
                 el = els[e]
+                if n == LANES:
+                    # a fixed trip count and the (peak, rate) pairs as one float32 axis:
+                    # LLVM writes them with vector interleaves (half the time of this loop
+                    # with n lanes, measured)
+                    for j in range(n_out):
+                        a = az_read[j] * LANES
+                        for t in range(LANES):
+                            out_f[el, j, 2 * (r0 + t)] = peak[0, e, a + t]
+                            out_f[el, j, 2 * (r0 + t) + 1] = bins[0, e, a + t]
+                    continue
                 for j in range(n_out):
                     a = az_read[j] * LANES
                     for t in range(n):
