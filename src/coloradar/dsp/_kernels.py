@@ -512,11 +512,27 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
             mr = np.float32(0.0)
             mi = np.float32(0.0)
             if dc_removal:
-                sr = 0.0
-                si = 0.0
-                for n in range(ns):
-                    sr += adc[t, r, c, 2 * n]
-                    si += adc[t, r, c, 2 * n + 1]
+                # four partial sums per part: one running float64 sum is a chain of
+                # dependent adds (latency-bound, most of this kernel's time); four chains
+                # overlap. float64 throughout, so the float32 mean is the same but for
+                # the rare sum that lies on a float32 rounding boundary.
+                s0r = s1r = s2r = s3r = 0.0
+                s0i = s1i = s2i = s3i = 0.0
+                n4 = ns - ns % 4
+                for n in range(0, 2 * n4, 8):
+                    s0r += adc[t, r, c, n]
+                    s0i += adc[t, r, c, n + 1]
+                    s1r += adc[t, r, c, n + 2]
+                    s1i += adc[t, r, c, n + 3]
+                    s2r += adc[t, r, c, n + 4]
+                    s2i += adc[t, r, c, n + 5]
+                    s3r += adc[t, r, c, n + 6]
+                    s3i += adc[t, r, c, n + 7]
+                for n in range(n4, ns):
+                    s0r += adc[t, r, c, 2 * n]
+                    s0i += adc[t, r, c, 2 * n + 1]
+                sr = (s0r + s1r) + (s2r + s3r)
+                si = (s0i + s1i) + (s2i + s3i)
                 mr = np.float32((sr - cmr) / ns)
                 mi = np.float32((si - cmi) / ns)
             w = chirp_weight[c]
