@@ -370,18 +370,11 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
     stages = 0
     while (1 << stages) < n_az:
         stages += 1
-    # The gather writes the FFT's first stage directly, one stage fewer: element x at
-    # position p < n/2 gives y[2p] = x, y[2p + 1] = w^p·x; at p = j + n/2 it adds x to
-    # y[2j] and −w^j·x to y[2j + 1] (written, not added, where position j holds no
-    # element). Points no element reaches stay zero. The single chip's elements all sit in
-    # the first half (8 of 64); the cascade's row 0 spans 86 of 128.
-    skip = 1 if stages > 1 else 0
+    # All elements in the first half of the azimuth points (the single chip: 8 of 64): the
+    # FFT's first stage has no second inputs, y[2p] = x[p], y[2p + 1] = w^p·x[p], and the
+    # gather writes its output directly (the other points stay zero): one stage fewer.
+    skip = 1 if stages > 1 and 2 * (az_pos.max() + 1) <= n_az else 0
     stages -= skip
-    half_az = n_az // 2
-    occupied = np.zeros((rows, max(half_az, 1)), np.bool_)   # element at (row, p < n/2)
-    for mm in range(channels.size):
-        if az_pos[mm] < half_az:
-            occupied[row_of[mm], az_pos[mm]] = True
     if stages % 2 == 1:                         # where _fft_lanes leaves the spectrum
         sp_r, sp_i = a_r.reshape(2, rows, flat), a_i.reshape(2, rows, flat)
     else:
@@ -412,39 +405,28 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
         bins_m[:] = 0.0
         for d0 in range(0, nd, 2):
             for d in range(d0, min(d0 + 2, nd)):
-                for mm in range(channels.size):        # first-half positions first
+                for mm in range(channels.size):
                     c, q, p = channels[mm], row_of[mm], az_pos[mm]
                     g = gain[c, d]
                     gr, gi = g.real, g.imag
-                    if not skip:
+                    if skip:
+                        hr, hi = gr * w_r[p] - gi * w_i[p], gr * w_i[p] + gi * w_r[p]
+                        for t in range(n):
+                            v = cube[c, d, r0 + t]
+                            src_r[q, 2 * p, t] = gr * v.real - gi * v.imag
+                            src_i[q, 2 * p, t] = gr * v.imag + gi * v.real
+                            src_r[q, 2 * p + 1, t] = hr * v.real - hi * v.imag
+                            src_i[q, 2 * p + 1, t] = hr * v.imag + hi * v.real
+                    elif n == LANES:                # full block: a fixed trip count
+                        for t in range(LANES):
+                            vr, vi = cf[c, d, 2 * (r0 + t)], cf[c, d, 2 * (r0 + t) + 1]
+                            src_r[q, p, t] = gr * vr - gi * vi
+                            src_i[q, p, t] = gr * vi + gi * vr
+                    else:
                         for t in range(n):
                             v = cube[c, d, r0 + t]
                             src_r[q, p, t] = gr * v.real - gi * v.imag
                             src_i[q, p, t] = gr * v.imag + gi * v.real
-                    elif p < half_az:
-                        hr, hi = gr * w_r[p] - gi * w_i[p], gr * w_i[p] + gi * w_r[p]
-                        for t in range(n):
-                            vr, vi = cf[c, d, 2 * (r0 + t)], cf[c, d, 2 * (r0 + t) + 1]
-                            src_r[q, 2 * p, t] = gr * vr - gi * vi
-                            src_i[q, 2 * p, t] = gr * vi + gi * vr
-                            src_r[q, 2 * p + 1, t] = hr * vr - hi * vi
-                            src_i[q, 2 * p + 1, t] = hr * vi + hi * vr
-                for mm in range(channels.size if skip else 0):   # then the second half
-                    c, q, p = channels[mm], row_of[mm], az_pos[mm] - half_az
-                    if p < 0:
-                        continue
-                    g = gain[c, d]
-                    gr, gi = g.real, g.imag
-                    hr, hi = gi * w_i[p] - gr * w_r[p], -gr * w_i[p] - gi * w_r[p]
-                    keep = np.float32(1.0) if occupied[q, p] else np.float32(0.0)
-                    for t in range(n):
-                        vr, vi = cf[c, d, 2 * (r0 + t)], cf[c, d, 2 * (r0 + t) + 1]
-                        src_r[q, 2 * p, t] = keep * src_r[q, 2 * p, t] + (gr * vr - gi * vi)
-                        src_i[q, 2 * p, t] = keep * src_i[q, 2 * p, t] + (gr * vi + gi * vr)
-                        src_r[q, 2 * p + 1, t] = (keep * src_r[q, 2 * p + 1, t]
-                                                  + (hr * vr - hi * vi))
-                        src_i[q, 2 * p + 1, t] = (keep * src_i[q, 2 * p + 1, t]
-                                                  + (hr * vi + hi * vr))
                 # one call site per inlined helper (each site is a copy of its loops for
                 # LLVM to optimise: two sites of each made this kernel's first compile
                 # take twice as long)
