@@ -180,46 +180,47 @@ def _elevate(xr: Any, xi: Any, sr: Any, si: Any, n_even: int, peak_p: Any, bins_
             _update(peak_m[r, e], bins_m[r, e], dd, er - o_r, ei - o_i)
 
 
+@numba.njit(inline="always")
+def _pairs(rows: int, n_even: int, sr: Any, si: Any) -> bool:  # pragma: no cover - compiled
+    # whether _elevate2 takes this layout: the single chip's rows 0 | 1
+    return rows == 2 and n_even == 1 and sr[0, 0] == 1.0 and si[0, 0] == 0.0
+
+
 @numba.njit(inline="always", fastmath=_FM)
-def _elevate2(xr: Any, xi: Any, yr: Any, yi: Any, sr: Any, si: Any, n_even: int,
-              peak_p: Any, bins_p: Any, peak_m: Any, bins_m: Any, vx: Any, vy: Any, er: Any,
-              ei: Any, o_r: Any, o_i: Any) -> None:  # pragma: no cover - compiled
+def _elevate2(xr: Any, xi: Any, yr: Any, yi: Any, sr: Any, si: Any, peak_p: Any,
+              bins_p: Any, peak_m: Any, bins_m: Any, vx: Any,
+              vy: Any) -> None:  # pragma: no cover - compiled
     # _elevate for two Doppler bins at once (spectra x then y, labels vx then vy) and range
     # index 0. For the single chip the pair's larger power meets the running maximum, so
     # the state arrays are read and written once per two bins (their loads and stores, not
     # the arithmetic, bound that loop: 13 % less time); ties go to the earlier bin, as
     # argmax. The cascade's loop is bound by its arithmetic, and pairing it measured slower
-    # (register pressure): other layouts take the bins one at a time.
-    rows, naz = xr.shape
+    # (register pressure): other layouts take the bins one at a time (the caller checks
+    # _pairs first). Only the single chip's layout (rows 0 | 1) is here.
+    naz = xr.shape[1]
     n_st = sr.shape[0]
-    if rows == 2 and n_even == 1 and sr[0, 0] == 1.0 and si[0, 0] == 0.0:
-        for e in range(n_st):
-            c1r, c1i = sr[e, 1], si[e, 1]
-            for a in range(naz):
-                vr, vi, ur, ui = xr[0, a], xi[0, a], yr[0, a], yi[0, a]
-                wr = c1r * xr[1, a] - c1i * xi[1, a]
-                wi = c1r * xi[1, a] + c1i * xr[1, a]
-                zr = c1r * yr[1, a] - c1i * yi[1, a]
-                zi = c1r * yi[1, a] + c1i * yr[1, a]
-                p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
-                q = (ur + zr) * (ur + zr) + (ui + zi) * (ui + zi)
-                lab = vy if q > p else vx
-                p = max(p, q)
-                b = peak_p[0, e, a]
-                bins_p[0, e, a] = lab if p > b else bins_p[0, e, a]
-                peak_p[0, e, a] = max(b, p)
-                p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
-                q = (ur - zr) * (ur - zr) + (ui - zi) * (ui - zi)
-                lab = vy if q > p else vx
-                p = max(p, q)
-                b = peak_m[0, e, a]
-                bins_m[0, e, a] = lab if p > b else bins_m[0, e, a]
-                peak_m[0, e, a] = max(b, p)
-    else:
-        _elevate(xr, xi, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, 0, vx, er, ei, o_r,
-                 o_i)
-        _elevate(yr, yi, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, 0, vy, er, ei, o_r,
-                 o_i)
+    for e in range(n_st):
+        c1r, c1i = sr[e, 1], si[e, 1]
+        for a in range(naz):
+            vr, vi, ur, ui = xr[0, a], xi[0, a], yr[0, a], yi[0, a]
+            wr = c1r * xr[1, a] - c1i * xi[1, a]
+            wi = c1r * xi[1, a] + c1i * xr[1, a]
+            zr = c1r * yr[1, a] - c1i * yi[1, a]
+            zi = c1r * yi[1, a] + c1i * yr[1, a]
+            p = (vr + wr) * (vr + wr) + (vi + wi) * (vi + wi)
+            q = (ur + zr) * (ur + zr) + (ui + zi) * (ui + zi)
+            lab = vy if q > p else vx
+            p = max(p, q)
+            b = peak_p[0, e, a]
+            bins_p[0, e, a] = lab if p > b else bins_p[0, e, a]
+            peak_p[0, e, a] = max(b, p)
+            p = (vr - wr) * (vr - wr) + (vi - wi) * (vi - wi)
+            q = (ur - zr) * (ur - zr) + (ui - zi) * (ui - zi)
+            lab = vy if q > p else vx
+            p = max(p, q)
+            b = peak_m[0, e, a]
+            bins_m[0, e, a] = lab if p > b else bins_m[0, e, a]
+            peak_m[0, e, a] = max(b, p)
 
 
 @numba.njit(inline="always")
@@ -354,6 +355,8 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
     (``(num_el, num_az, range, 2)``).
     """
     nd, nr = cube.shape[1], cube.shape[2]
+    cf = cube.reshape(cube.shape[0], nd, nr).view(np.float32)     # (C, doppler, 2·range)
+    out_f = out.reshape(out.shape[0], out.shape[1], 2 * nr)        # (el, az, 2·range)
     n_az = 2 * w_r.size
     n_st, rows = steer.shape
     n_out = out.shape[1]
@@ -391,6 +394,7 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
     o_r = np.empty(flat, np.float32)
     o_i = np.empty(flat, np.float32)
     sr, si = _split_steering(steer)
+    pairs = _pairs(rows, n_even, sr, si)
     for r0 in range(0, nr, LANES):
         n = min(LANES, nr - r0)
         if n < LANES:                           # last, partial block: idle lanes stay 0
@@ -414,27 +418,45 @@ def peak_over_doppler_planar(cube: Any, gain: Any, channels: Any, row_of: Any, a
                             src_i[q, 2 * p, t] = gr * v.imag + gi * v.real
                             src_r[q, 2 * p + 1, t] = hr * v.real - hi * v.imag
                             src_i[q, 2 * p + 1, t] = hr * v.imag + hi * v.real
+                    elif n == LANES:                # full block: a fixed trip count
+                        for t in range(LANES):
+                            vr, vi = cf[c, d, 2 * (r0 + t)], cf[c, d, 2 * (r0 + t) + 1]
+                            src_r[q, p, t] = gr * vr - gi * vi
+                            src_i[q, p, t] = gr * vi + gi * vr
                     else:
                         for t in range(n):
                             v = cube[c, d, r0 + t]
                             src_r[q, p, t] = gr * v.real - gi * v.imag
                             src_i[q, p, t] = gr * v.imag + gi * v.real
+                # one call site per inlined helper (each site is a copy of its loops for
+                # LLVM to optimise: two sites of each made this kernel's first compile
+                # take twice as long)
+                br, bi, ar, ai = (b0r, b0i, a0r, a0i) if d == d0 else (b1r, b1i, a1r, a1i)
                 for q in range(rows):
-                    if d == d0:
-                        _fft_lanes(src_r, src_i, b0r, b0i, a0r, a0i, w_r, w_i, q, skip)
-                    else:
-                        _fft_lanes(src_r, src_i, b1r, b1i, a1r, a1i, w_r, w_i, q, skip)
-            if d0 + 1 < nd:
-                _elevate2(x_r, x_i, y_r, y_i, sr, si, n_even, peak_p, bins_p, peak_m, bins_m,
-                          velocities[d0], velocities[d0 + 1], er, ei, o_r, o_i)
-            else:
-                _elevate(x_r, x_i, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, 0,
-                         velocities[d0], er, ei, o_r, o_i)
+                    _fft_lanes(src_r, src_i, br, bi, ar, ai, w_r, w_i, q, skip)
+            if d0 + 1 < nd and pairs:
+                _elevate2(x_r, x_i, y_r, y_i, sr, si, peak_p, bins_p, peak_m, bins_m,
+                          velocities[d0], velocities[d0 + 1])
+                continue
+            for d in range(d0, min(d0 + 2, nd)):
+                xr_, xi_ = (x_r, x_i) if d == d0 else (y_r, y_i)
+                _elevate(xr_, xi_, sr, si, n_even, peak_p, bins_p, peak_m, bins_m, 0,
+                         velocities[d], er, ei, o_r, o_i)
         for half in range(1 if n_even < 0 else 2):
             peak, bins, els = (peak_p, bins_p, el_plus) if half == 0 else (peak_m, bins_m,
                                                                            el_minus)
             for e in range(n_st):
                 el = els[e]
+                if n == LANES:
+                    # a fixed trip count and the (peak, rate) pairs as one float32 axis:
+                    # LLVM writes them with vector interleaves (half the time of this loop
+                    # with n lanes, measured)
+                    for j in range(n_out):
+                        a = az_read[j] * LANES
+                        for t in range(LANES):
+                            out_f[el, j, 2 * (r0 + t)] = peak[0, e, a + t]
+                            out_f[el, j, 2 * (r0 + t) + 1] = bins[0, e, a + t]
+                    continue
                 for j in range(n_out):
                     a = az_read[j] * LANES
                     for t in range(n):
@@ -491,11 +513,27 @@ def prepare_chirps(adc: Any, channels: Any, coupling: Any, gain: Any, chirp_weig
             mr = np.float32(0.0)
             mi = np.float32(0.0)
             if dc_removal:
-                sr = 0.0
-                si = 0.0
-                for n in range(ns):
-                    sr += adc[t, r, c, 2 * n]
-                    si += adc[t, r, c, 2 * n + 1]
+                # four partial sums per part: one running float64 sum is a chain of
+                # dependent adds (latency-bound, most of this kernel's time); four chains
+                # overlap. float64 throughout, so the float32 mean is the same but for
+                # the rare sum that lies on a float32 rounding boundary.
+                s0r = s1r = s2r = s3r = 0.0
+                s0i = s1i = s2i = s3i = 0.0
+                n4 = ns - ns % 4
+                for n in range(0, 2 * n4, 8):
+                    s0r += adc[t, r, c, n]
+                    s0i += adc[t, r, c, n + 1]
+                    s1r += adc[t, r, c, n + 2]
+                    s1i += adc[t, r, c, n + 3]
+                    s2r += adc[t, r, c, n + 4]
+                    s2i += adc[t, r, c, n + 5]
+                    s3r += adc[t, r, c, n + 6]
+                    s3i += adc[t, r, c, n + 7]
+                for n in range(n4, ns):
+                    s0r += adc[t, r, c, 2 * n]
+                    s0i += adc[t, r, c, 2 * n + 1]
+                sr = (s0r + s1r) + (s2r + s3r)
+                si = (s0i + s1i) + (s2i + s3i)
                 mr = np.float32((sr - cmr) / ns)
                 mi = np.float32((si - cmi) / ns)
             w = chirp_weight[c]

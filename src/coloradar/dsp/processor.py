@@ -630,43 +630,58 @@ class RadarProcessor:
             unwrapped rate (:meth:`_heatmap_unwrapped`).
         """
         s = self.settings
-        if self._engine == "numba" and s.overlap == "first" and not s.heatmap_unwrap:
+        if self._reads_channels():
             return self._heatmap_read_channels(adc)
         rd = self.range_doppler(adc)
         return self._heatmap_unwrapped(rd) if s.heatmap_unwrap else self._heatmap(rd)
 
+    def _reads_channels(self) -> bool:
+        """Whether :meth:`heatmap` takes :meth:`_heatmap_read_channels` (the compiled engine
+        reading the first pair's channels, the TDM compensation applied in its gather)."""
+        s = self.settings
+        return self._engine == "numba" and s.overlap == "first" and not s.heatmap_unwrap
+
     def _heatmap_read_channels(self, adc: np.ndarray) -> np.ndarray:
         """:meth:`_heatmap` computing the range–Doppler cube of only the channels it reads
-        (the cascade's 134 first pairs of 192 channels): the same values to the bit (FFTs do
-        not depend on the batch; TDM is the same multiply as in :meth:`_doppler`, so that
-        :meth:`products` gives the same heatmap), less work."""
+        (the cascade's 134 first pairs of 192 channels), less work. The values are those of
+        :meth:`_heatmap` with ``tdm_applied=False`` on the full cube to the bit (FFTs do not
+        depend on the batch; the kernel multiplies each channel by the same TDM factors), so
+        that :meth:`products` gives the same heatmap."""
         if self._read_channels is None:
             nrx = self.calib.frame_shape[1]
             first = self.calib.antenna.virtual.first_pair
             used, element_channel = np.unique(first[:, 0] * nrx + first[:, 1],
                                               return_inverse=True)
-            tdm = None if self._tdm is None else self._tdm[used // nrx, 0]   # (K, nd, 1)
+            tdm = None if self._tdm is None else self._tdm_table[used // nrx]   # (K, nd)
             self._read_channels = used, element_channel, tdm
         used, element_channel, tdm = self._read_channels
         rc = self._range_cube_compiled(self._check(adc), self.num_range_bins, used)  # (K, chirp, range)
         v = sfft.fft(rc, n=self.doppler_fft_size, axis=1, workers=self.settings.workers)
         if self.doppler_fft_size % 2:
             v = sfft.fftshift(v, axes=1)
-        if tdm is not None:
-            v *= tdm
+        # the TDM factors go to the kernel, which applies them while gathering (a pass over
+        # the cube less than v *= tdm)
         return heatmap_from_elements(v, self.grid, self.velocities,
                                      workers=self.settings.workers, engine=self._engine,
-                                     channels=element_channel)
+                                     channels=element_channel, doppler_phase=tdm)
 
-    def _heatmap(self, rd: np.ndarray) -> np.ndarray:
+    def _heatmap(self, rd: np.ndarray, tdm_applied: bool = True) -> np.ndarray:
+        """Heatmap of a range–Doppler cube; ``tdm_applied=False``: ``rd`` lacks the TDM
+        compensation, which the engine then applies (``overlap="first"`` only)."""
         if self.settings.overlap == "first":
             # the engine reads each element's channel straight from the cube
             ntx, nrx = rd.shape[:2]
             first = self.calib.antenna.virtual.first_pair
+            phase = None
+            if not tdm_applied and self._tdm is not None:
+                phase = self._tdm_table[np.arange(ntx * nrx) // nrx]            # (C, nd)
             return heatmap_from_elements(rd.reshape(ntx * nrx, *rd.shape[2:]), self.grid,
                                          self.velocities, workers=self.settings.workers,
                                          engine=self._engine,
-                                         channels=first[:, 0] * nrx + first[:, 1])
+                                         channels=first[:, 0] * nrx + first[:, 1],
+                                         doppler_phase=phase)
+        if not tdm_applied and self._tdm is not None:
+            rd = rd * self._tdm
         elements = combine_channels(rd, self.calib.antenna.virtual, self.settings.overlap)
         return heatmap_from_elements(elements, self.grid, self.velocities,
                                      workers=self.settings.workers, engine=self._engine)
@@ -1447,16 +1462,19 @@ class RadarProcessor:
             ``(heatmap or None, pointcloud or None)`` as :meth:`heatmap` and :meth:`pointcloud`.
         """
         nr = self.num_range_bins
+        in_kernel = heatmap and self._reads_channels()    # TDM applied as heatmap() does
         rcube = self._range_cube(adc, extra=pointcloud)
-        rd = self._doppler(rcube[..., :nr], compensate=not pointcloud)
+        rd = self._doppler(rcube[..., :nr], compensate=not (pointcloud or in_kernel))
         pts = None
         if pointcloud:
             pts = self._detect(rcube[..., :nr], rd,
                                self._doppler(rcube[..., nr:], compensate=False)).pointcloud()
-            if heatmap and self._tdm is not None:
+            if heatmap and not in_kernel and self._tdm is not None:
                 rd *= self._tdm                      # as _doppler: the heatmap's bits
         if not heatmap:
             return None, pts
+        if in_kernel:
+            return self._heatmap(rd, tdm_applied=False), pts
         return (self._heatmap_unwrapped(rd) if self.settings.heatmap_unwrap
                 else self._heatmap(rd)), pts
 
