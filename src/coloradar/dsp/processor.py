@@ -26,7 +26,6 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
-from scipy.ndimage import maximum_filter
 from scipy.stats import f as f_dist
 
 from ..calib import HeatmapConfig, RadarCalib
@@ -63,7 +62,6 @@ from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import (
     Detections,
     channel_noise,
-    local_maxima,
     sidelobe_envelope,
     sidelobe_pairs,
     source_fit_residuals,
@@ -827,21 +825,39 @@ class RadarProcessor:
             # Cells that peak along Doppler or along range: a target one bin from a stronger
             # one (in the other axis) is no 2D maximum of the summed power, but it is one of
             # its own beam; the beam test below decides (docs/dsp.md, "Grouping").
-            along_d = (stat >= np.roll(stat, 1, axis=0)) & (stat >= np.roll(stat, -1, axis=0))
-            up = np.empty_like(stat)
-            up[:, :-1] = stat[:, 1:]
-            up[:, -1] = -np.inf if nxt is None else nxt
-            down = np.empty_like(stat)
-            down[:, 1:] = stat[:, :-1]
-            down[:, 0] = -np.inf
-            along_r = (stat >= up) & (stat >= down)
-            peaks = mask & along_d & along_r & local_maxima(stat, ("wrap", "mirror"))
+            # (neighbours compared in place, no rolled copies of the map)
+            along_d = np.empty(stat.shape, dtype=bool)
+            along_d[1:] = stat[1:] >= stat[:-1]
+            along_d[0] = stat[0] >= stat[-1]
+            along_d[:-1] &= stat[:-1] >= stat[1:]
+            along_d[-1] &= stat[-1] >= stat[0]
+            along_r = np.ones(stat.shape, dtype=bool)
+            along_r[:, :-1] = stat[:, :-1] >= stat[:, 1:]
             if nxt is not None:
-                peaks &= stat >= up
+                along_r[:, -1] = stat[:, -1] >= nxt
+            along_r[:, 1:] &= stat[:, 1:] >= stat[:, :-1]
+            peaks = mask & along_d & along_r
+            # The 3×3 maximum (Doppler wrapped, range mirrored) on the few cells left: the
+            # cross is the two tests above, the diagonals remain (a mirrored range edge
+            # repeats the inner column: the same diagonals).
+            cd, cr = np.nonzero(peaks)
+            if cd.size and nr > 1:
+                lo = np.where(cr > 0, cr - 1, 1)
+                hi = np.where(cr < nr - 1, cr + 1, nr - 2)
+                dm, dp = (cd - 1) % nd, (cd + 1) % nd
+                v = stat[cd, cr]
+                diag = ((v >= stat[dm, lo]) & (v >= stat[dm, hi]) & (v >= stat[dp, lo])
+                        & (v >= stat[dp, hi]))
+                peaks[cd[~diag], cr[~diag]] = False
             # Cells that peak along one axis only are examined beside a strong 2D peak (a
             # target one bin from a stronger one); elsewhere they would add noise crossings.
             strong = peaks & (stat >= STRONG_NEIGHBOUR * noise)
-            beside = maximum_filter(strong, size=3, mode=("wrap", "nearest"))
+            # (the 3×3 dilation of the few strong cells, Doppler wrapped, range clipped)
+            sd, sr = np.nonzero(strong)
+            beside = np.zeros(stat.shape, dtype=bool)
+            for o in (-1, 0, 1):
+                beside[((sd + o) % nd)[:, None],
+                       np.clip(sr[:, None] + np.array([-1, 0, 1]), 0, nr - 1)] = True
             mask = peaks | (mask & (along_d | along_r) & beside)
         d, r = np.nonzero(mask)
         near = r < int(np.ceil(s.min_range / self.range_bin_width))
