@@ -21,6 +21,7 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from typing import Any, Literal, get_args
 
@@ -505,6 +506,7 @@ class RadarProcessor:
         self._beam_kernels = self._init_beam_kernels()
         # (focusing phase as a quadratic in the sines, for the secondary peaks' bound)
         self._near_terms = self._near.planar_terms() if self._focus else None
+        self._near_factors: tuple[np.ndarray, ...] | None = None
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
@@ -747,10 +749,12 @@ class RadarProcessor:
                             self._doppler(rcube[..., nr:], compensate=False))
 
     def _detection_map(self, rd: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
-        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), the
-        looks the CFAR threshold is computed for (``noise_weighting``), and the channels'
-        noise powers (float64 ``(tx·rx,)``; None without whitening)."""
+                       ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], int,
+                                  np.ndarray | None]:
+        """Detection statistic ``(doppler, range)`` float64, the plain power sum (float32)
+        at given flat ``doppler·nr + range`` cells, the looks the CFAR threshold is computed
+        for (``noise_weighting``), and the channels' noise powers (float64 ``(tx·rx,)``;
+        None without whitening)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
         if self._beam_kernels is not None:
@@ -760,9 +764,10 @@ class RadarProcessor:
         else:
             mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
             np.square(mag2, out=mag2)
-        plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
-            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks, None
+            plain = mag2.sum(axis=0)
+            return (plain.reshape(nd, nr).astype(np.float64), plain.__getitem__, self._looks,
+                    None)
         # Inverse-noise weights: each term a unit exponential times the mean noise power, so
         # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
@@ -774,7 +779,10 @@ class RadarProcessor:
             keep = ~self._uncoupled
             row = wts[keep] @ mag2.reshape(ntx * nrx, nd, nr)[keep, z, :]
             stat[z] = row * (wts.sum() / wts[keep].sum())
-        return stat, plain, self._looks, sig2
+        # The plain sum is read at the few points' cells only: summed there, channel after
+        # channel as numpy sums the whole map along axis 0 (cumsum's last row: the same
+        # float32 values), instead of a pass over the map.
+        return stat, lambda i: np.cumsum(mag2[:, i], axis=0)[-1], self._looks, sig2
 
     def _exclude_row(self, weighted: np.ndarray, nd: int) -> np.ndarray:
         """Detection statistic ``(doppler,)`` of one range bin from weighted channel powers
@@ -813,7 +821,7 @@ class RadarProcessor:
         for the range bin after the last one, when computed (a return beyond the processed
         range then makes no local maximum at the last bin)."""
         s = self.settings
-        stat, plain, looks, sig2 = self._detection_map(rd)
+        stat, plain_at, looks, sig2 = self._detection_map(rd)
         nxt = None
         if rd_next is not None and rd_next.shape[-1]:
             m2 = np.square(np.abs(rd_next[..., 0])).reshape(-1, rd_next.shape[2])
@@ -966,12 +974,11 @@ class RadarProcessor:
         # Range and direction are measured from the virtual array's phase centre.
         xyz = self._centre[None, :] + rng_c[:, None] * unit
         rng = np.linalg.norm(xyz, axis=1)
-        flat = plain.reshape(nd, nr)
         return Detections(
             range_bin=pr.astype(np.int64), doppler_bin=pd.astype(np.int64), range=rng,
             range_rate=rate, azimuth=np.arctan2(xyz[:, 1], xyz[:, 0]),
             elevation=np.arcsin(np.clip(xyz[:, 2] / np.maximum(rng, 1e-12), -1.0, 1.0)),
-            xyz=xyz, intensity=peak, power=flat[pd, pr].astype(np.float64),
+            xyz=xyz, intensity=peak, power=plain_at(pd * nr + pr).astype(np.float64),
             snr=stat[pd, pr] / noise[pd, pr], alias=palias)
 
     def _steer(self, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -1064,7 +1071,7 @@ class RadarProcessor:
         # Joint least-squares amplitudes of each cell's remaining sources (sidelobes of a
         # second source get little of it), then each source refined on its cell's vector
         # less the others' fit; all batched over cells (at most MAX_SOURCES per cell).
-        _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+        cell_of, count = _groups(ci)
         if count.max() < 2:
             return uy, uz, peak, w, ci
         rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
@@ -1083,7 +1090,7 @@ class RadarProcessor:
             uy, uz, peak, w, ci, x, rho, rank = (uy[several], uz[several], peak[several],
                                                  w[:, several], ci[several], x[several],
                                                  rho[several], rank[several])
-            _, cell_of = np.unique(ci, return_inverse=True)
+            cell_of = _groups(ci)[0]
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
@@ -1096,7 +1103,7 @@ class RadarProcessor:
             ok[rank == 0] = True
             uy, uz, peak, w, ci, x, rho, amps = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok],
                                                  x[ok], rho[ok], amps[ok])
-            _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+            cell_of, count = _groups(ci)
             rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
             multi = count[cell_of] > 1
             if not multi.any() or it == 2:
@@ -1152,8 +1159,11 @@ class RadarProcessor:
             u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
             sq, cyy, cyz, czz, ref = self._near_terms
             # (cyy = t_y² + r_y²: one phase factor per TX and one per RX, not per element)
-            ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
-            ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+            if self._near_factors is None:      # (the array's: found once, not per frame)
+                ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
+                ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+                self._near_factors = ty2, it, ry2, ir
+            ty2, it, ry2, ir = self._near_factors
             # (only the deferred peaks: the primaries' bound is not used)
             bound[:], top[:] = np.inf, 0.0
             j = np.flatnonzero(deferred)
@@ -1257,7 +1267,7 @@ class RadarProcessor:
         if not multi.any():
             return out
         x, w, rank = x[multi], w[:, multi], rank[multi]
-        _, cell_of = np.unique(cell_of[multi], return_inverse=True)
+        cell_of = _groups(cell_of[multi])[0]
         ncell = int(cell_of.max()) + 1
         nmax = int(rank.max()) + 1
         m = w.shape[0]
@@ -1498,6 +1508,21 @@ class RadarProcessor:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
                    if getattr(self.settings, f.name) != f.default}
         return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+def _groups(ci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(ci, return_inverse=True, return_counts=True)[1:]`` without the sort where
+    ``ci`` is already non-decreasing (the peaks' cells always are: :func:`~coloradar.dsp.
+    angle.azimuth_peaks` returns them by cell, and only masks follow)."""
+    ci = np.asarray(ci)
+    if ci.size == 0 or np.any(ci[1:] < ci[:-1]):
+        _, inv, cnt = np.unique(ci, return_inverse=True, return_counts=True)
+        return inv.reshape(-1), cnt
+    new = np.empty(ci.size, dtype=bool)
+    new[0] = True
+    np.not_equal(ci[1:], ci[:-1], out=new[1:])
+    cell_of = np.cumsum(new) - 1
+    return cell_of, np.diff(np.r_[np.flatnonzero(new), ci.size])
 
 
 def _f64(a: Any) -> np.ndarray:
