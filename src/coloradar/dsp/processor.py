@@ -918,7 +918,7 @@ class RadarProcessor:
                                                    or self._near_terms is not None):
                 # Secondary peaks get their elevation in _resolve_peaks once their cell's
                 # strongest source is known (most are its sidelobes and need none): NaN here.
-                lead = np.r_[True, ci[1:] != ci[:-1]] if ci.size else np.zeros(0, dtype=bool)
+                lead = _firsts(ci) if ci.size else np.zeros(0, dtype=bool)
                 uz, peak = np.full(ci.size, np.nan), np.zeros(ci.size)
                 uz[lead], peak[lead] = self._elevation_search(vectors[ci[lead]], uy[lead],
                                                               rho_cell[ci[lead]])
@@ -1094,7 +1094,7 @@ class RadarProcessor:
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
-            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            starts = np.flatnonzero(_firsts(cell_of))
             top = np.maximum.reduceat(pw, starts)
             ok = (pw >= floor[ci]) & (pw >= top[cell_of] * self._angle_dynamic)
             if it > 0:
@@ -1110,7 +1110,7 @@ class RadarProcessor:
                 break
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             model = np.conj(w) * amps[None, :]                          # (M, P) fitted sources
-            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            starts = np.flatnonzero(_firsts(cell_of))
             total = np.add.reduceat(model.T, starts, axis=0)            # peaks grouped by cell
             xp = (x - total[cell_of] + model.T)[multi]                  # vector less the others
             j = np.flatnonzero(multi)
@@ -1123,8 +1123,8 @@ class RadarProcessor:
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
         if lone is not None:
-            order = np.argsort(np.r_[lone[4], ci], kind="stable")
-            uy, uz, peak, ci = (np.r_[a, b][order] for a, b in zip(
+            order = np.argsort(np.concatenate((lone[4], ci)), kind="stable")
+            uy, uz, peak, ci = (np.concatenate((a, b))[order] for a, b in zip(
                 (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
             w = np.concatenate([lone[3], w], axis=1)[:, order]
         return uy, uz, peak, w, ci
@@ -1211,7 +1211,7 @@ class RadarProcessor:
         total = np.add.reduceat(model.T, starts, axis=0)                # (C, M)
         first = x[starts]                                               # each cell's vector
         rss = np.sum(np.abs(first - total) ** 2, axis=1)                # (C,)
-        count = np.diff(np.r_[starts, cell_of.size])
+        count = np.diff(np.append(starts, cell_of.size))
         nu = np.maximum(m - 2 * count, 1)
         return (self._f_threshold[nu] * rss / nu / m)[cell_of]
 
@@ -1257,7 +1257,7 @@ class RadarProcessor:
         kb = self._beam_kernels
         if kb is not None and cell_of.size and np.all(np.diff(cell_of) >= 0):
             # (the peaks of a cell are consecutive, as _resolve_peaks keeps them)
-            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1], True])
+            starts = np.flatnonzero(_firsts(cell_of, end=True))
             amps = np.empty(cell_of.size, dtype=np.complex128)
             kb["k"].joint_amplitudes(_c64(x), _c64(w), starts.astype(np.int64), amps)
             return amps
@@ -1518,11 +1518,23 @@ def _groups(ci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if ci.size == 0 or np.any(ci[1:] < ci[:-1]):
         _, inv, cnt = np.unique(ci, return_inverse=True, return_counts=True)
         return inv.reshape(-1), cnt
-    new = np.empty(ci.size, dtype=bool)
-    new[0] = True
-    np.not_equal(ci[1:], ci[:-1], out=new[1:])
+    new = _firsts(ci)
     cell_of = np.cumsum(new) - 1
-    return cell_of, np.diff(np.r_[np.flatnonzero(new), ci.size])
+    return cell_of, np.diff(np.append(np.flatnonzero(new), ci.size))
+
+
+def _firsts(ci: np.ndarray, end: bool = False) -> np.ndarray:
+    """bool ``(N,)`` (``end``: ``(N + 1,)``, True last): True where ``ci`` starts a run of
+    equal values (``np.r_[True, ci[1:] != ci[:-1]]``, without ``np.r_``'s parsing cost,
+    which counts at a few dozen peaks per frame)."""
+    ci = np.asarray(ci)
+    n = max(ci.size, 1)                                 # (as np.r_: [True] when empty)
+    out = np.empty(n + int(end), dtype=bool)
+    out[0] = True
+    np.not_equal(ci[1:], ci[:-1], out=out[1:n])
+    if end:
+        out[-1] = True
+    return out
 
 
 def _f64(a: Any) -> np.ndarray:
