@@ -358,6 +358,11 @@ class NearField:
             # k·q_m(R0, x̂): the reflector's phases that the calibration removed
             xx = sum((c for i, j, c in self._quad if i == j == 0), np.zeros_like(self._sq))
             self._ref = self.wavenumber * (self._sq - xx) / (2.0 * self.reference)
+        # float32 copies of the per-element terms (:meth:`_focus` works in float32): made
+        # once here, not at every call
+        self._sq32 = self._sq.astype(np.float32)
+        self._quad32 = [(i, j, c.astype(np.float32)) for i, j, c in self._quad]
+        self._ref32 = None if self._ref is None else self._ref.astype(np.float32)
 
     def focus(self, unit: np.ndarray, rng: np.ndarray, absolute: bool = False,
               transpose: bool = False) -> np.ndarray:
@@ -414,8 +419,7 @@ class NearField:
         a = (-self.wavenumber / (2.0 * np.maximum(np.asarray(rng, dtype=np.float64), 1e-3))
              ).astype(np.float32)
 
-        def per_element(v: np.ndarray) -> np.ndarray:
-            v = v.astype(np.float32)
+        def per_element(v: np.ndarray) -> np.ndarray:          # (v float32 already)
             return v[None, :] if transpose else v[:, None]
 
         def per_detection(v: np.ndarray) -> np.ndarray:
@@ -425,12 +429,12 @@ class NearField:
         shape = (k, self._sq.size) if transpose else (self._sq.size, k)
         ph = np.empty(shape, dtype=np.float32)
         tmp = np.empty(shape, dtype=np.float32)
-        np.copyto(ph, per_element(self._sq))
-        for i, j, c in self._quad:
+        np.copyto(ph, per_element(self._sq32))
+        for i, j, c in self._quad32:
             ph -= np.multiply(per_element(c), per_detection(comp(i) * comp(j)), out=tmp)
         ph *= per_detection(a)
-        if self._ref is not None and not absolute:
-            ph += per_element(self._ref)
+        if self._ref32 is not None and not absolute:
+            ph += per_element(self._ref32)
         out = np.empty(shape, dtype=np.complex64)
         np.cos(ph, out=out.real)
         np.sin(ph, out=out.imag)

@@ -21,12 +21,12 @@ Chain (each step a stage of :mod:`coloradar.dsp`)::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from typing import Any, Literal, get_args
 
 import numpy as np
 import scipy.fft as sfft
-from scipy.ndimage import maximum_filter
 from scipy.stats import f as f_dist
 
 from ..calib import HeatmapConfig, RadarCalib
@@ -63,7 +63,6 @@ from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import (
     Detections,
     channel_noise,
-    local_maxima,
     sidelobe_envelope,
     sidelobe_pairs,
     source_fit_residuals,
@@ -507,6 +506,7 @@ class RadarProcessor:
         self._beam_kernels = self._init_beam_kernels()
         # (focusing phase as a quadratic in the sines, for the secondary peaks' bound)
         self._near_terms = self._near.planar_terms() if self._focus else None
+        self._near_factors: tuple[np.ndarray, ...] | None = None
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
@@ -749,10 +749,12 @@ class RadarProcessor:
                             self._doppler(rcube[..., nr:], compensate=False))
 
     def _detection_map(self, rd: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, int, np.ndarray | None]:
-        """Detection statistic ``(doppler, range)`` float64, the plain power sum (flat), the
-        looks the CFAR threshold is computed for (``noise_weighting``), and the channels'
-        noise powers (float64 ``(tx·rx,)``; None without whitening)."""
+                       ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], int,
+                                  np.ndarray | None]:
+        """Detection statistic ``(doppler, range)`` float64, the plain power sum (float32)
+        at given flat ``doppler·nr + range`` cells, the looks the CFAR threshold is computed
+        for (``noise_weighting``), and the channels' noise powers (float64 ``(tx·rx,)``;
+        None without whitening)."""
         s = self.settings
         ntx, nrx, nd, nr = rd.shape
         if self._beam_kernels is not None:
@@ -762,9 +764,10 @@ class RadarProcessor:
         else:
             mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
             np.square(mag2, out=mag2)
-        plain = mag2.sum(axis=0)
         if s.noise_weighting == "off":
-            return plain.reshape(nd, nr).astype(np.float64), plain, self._looks, None
+            plain = mag2.sum(axis=0)
+            return (plain.reshape(nd, nr).astype(np.float64), plain.__getitem__, self._looks,
+                    None)
         # Inverse-noise weights: each term a unit exponential times the mean noise power, so
         # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
@@ -776,7 +779,10 @@ class RadarProcessor:
             keep = ~self._uncoupled
             row = wts[keep] @ mag2.reshape(ntx * nrx, nd, nr)[keep, z, :]
             stat[z] = row * (wts.sum() / wts[keep].sum())
-        return stat, plain, self._looks, sig2
+        # The plain sum is read at the few points' cells only: summed there, channel after
+        # channel as numpy sums the whole map along axis 0 (cumsum's last row: the same
+        # float32 values), instead of a pass over the map.
+        return stat, lambda i: np.cumsum(mag2[:, i], axis=0)[-1], self._looks, sig2
 
     def _exclude_row(self, weighted: np.ndarray, nd: int) -> np.ndarray:
         """Detection statistic ``(doppler,)`` of one range bin from weighted channel powers
@@ -815,7 +821,7 @@ class RadarProcessor:
         for the range bin after the last one, when computed (a return beyond the processed
         range then makes no local maximum at the last bin)."""
         s = self.settings
-        stat, plain, looks, sig2 = self._detection_map(rd)
+        stat, plain_at, looks, sig2 = self._detection_map(rd)
         nxt = None
         if rd_next is not None and rd_next.shape[-1]:
             m2 = np.square(np.abs(rd_next[..., 0])).reshape(-1, rd_next.shape[2])
@@ -827,21 +833,39 @@ class RadarProcessor:
             # Cells that peak along Doppler or along range: a target one bin from a stronger
             # one (in the other axis) is no 2D maximum of the summed power, but it is one of
             # its own beam; the beam test below decides (docs/dsp.md, "Grouping").
-            along_d = (stat >= np.roll(stat, 1, axis=0)) & (stat >= np.roll(stat, -1, axis=0))
-            up = np.empty_like(stat)
-            up[:, :-1] = stat[:, 1:]
-            up[:, -1] = -np.inf if nxt is None else nxt
-            down = np.empty_like(stat)
-            down[:, 1:] = stat[:, :-1]
-            down[:, 0] = -np.inf
-            along_r = (stat >= up) & (stat >= down)
-            peaks = mask & along_d & along_r & local_maxima(stat, ("wrap", "mirror"))
+            # (neighbours compared in place, no rolled copies of the map)
+            along_d = np.empty(stat.shape, dtype=bool)
+            along_d[1:] = stat[1:] >= stat[:-1]
+            along_d[0] = stat[0] >= stat[-1]
+            along_d[:-1] &= stat[:-1] >= stat[1:]
+            along_d[-1] &= stat[-1] >= stat[0]
+            along_r = np.ones(stat.shape, dtype=bool)
+            along_r[:, :-1] = stat[:, :-1] >= stat[:, 1:]
             if nxt is not None:
-                peaks &= stat >= up
+                along_r[:, -1] = stat[:, -1] >= nxt
+            along_r[:, 1:] &= stat[:, 1:] >= stat[:, :-1]
+            peaks = mask & along_d & along_r
+            # The 3×3 maximum (Doppler wrapped, range mirrored) on the few cells left: the
+            # cross is the two tests above, the diagonals remain (a mirrored range edge
+            # repeats the inner column: the same diagonals).
+            cd, cr = np.nonzero(peaks)
+            if cd.size and nr > 1:
+                lo = np.where(cr > 0, cr - 1, 1)
+                hi = np.where(cr < nr - 1, cr + 1, nr - 2)
+                dm, dp = (cd - 1) % nd, (cd + 1) % nd
+                v = stat[cd, cr]
+                diag = ((v >= stat[dm, lo]) & (v >= stat[dm, hi]) & (v >= stat[dp, lo])
+                        & (v >= stat[dp, hi]))
+                peaks[cd[~diag], cr[~diag]] = False
             # Cells that peak along one axis only are examined beside a strong 2D peak (a
             # target one bin from a stronger one); elsewhere they would add noise crossings.
             strong = peaks & (stat >= STRONG_NEIGHBOUR * noise)
-            beside = maximum_filter(strong, size=3, mode=("wrap", "nearest"))
+            # (the 3×3 dilation of the few strong cells, Doppler wrapped, range clipped)
+            sd, sr = np.nonzero(strong)
+            beside = np.zeros(stat.shape, dtype=bool)
+            for o in (-1, 0, 1):
+                beside[((sd + o) % nd)[:, None],
+                       np.clip(sr[:, None] + np.array([-1, 0, 1]), 0, nr - 1)] = True
             mask = peaks | (mask & (along_d | along_r) & beside)
         d, r = np.nonzero(mask)
         near = r < int(np.ceil(s.min_range / self.range_bin_width))
@@ -894,7 +918,7 @@ class RadarProcessor:
                                                    or self._near_terms is not None):
                 # Secondary peaks get their elevation in _resolve_peaks once their cell's
                 # strongest source is known (most are its sidelobes and need none): NaN here.
-                lead = np.r_[True, ci[1:] != ci[:-1]] if ci.size else np.zeros(0, dtype=bool)
+                lead = _firsts(ci) if ci.size else np.zeros(0, dtype=bool)
                 uz, peak = np.full(ci.size, np.nan), np.zeros(ci.size)
                 uz[lead], peak[lead] = self._elevation_search(vectors[ci[lead]], uy[lead],
                                                               rho_cell[ci[lead]])
@@ -950,12 +974,11 @@ class RadarProcessor:
         # Range and direction are measured from the virtual array's phase centre.
         xyz = self._centre[None, :] + rng_c[:, None] * unit
         rng = np.linalg.norm(xyz, axis=1)
-        flat = plain.reshape(nd, nr)
         return Detections(
             range_bin=pr.astype(np.int64), doppler_bin=pd.astype(np.int64), range=rng,
             range_rate=rate, azimuth=np.arctan2(xyz[:, 1], xyz[:, 0]),
             elevation=np.arcsin(np.clip(xyz[:, 2] / np.maximum(rng, 1e-12), -1.0, 1.0)),
-            xyz=xyz, intensity=peak, power=flat[pd, pr].astype(np.float64),
+            xyz=xyz, intensity=peak, power=plain_at(pd * nr + pr).astype(np.float64),
             snr=stat[pd, pr] / noise[pd, pr], alias=palias)
 
     def _steer(self, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -1048,7 +1071,7 @@ class RadarProcessor:
         # Joint least-squares amplitudes of each cell's remaining sources (sidelobes of a
         # second source get little of it), then each source refined on its cell's vector
         # less the others' fit; all batched over cells (at most MAX_SOURCES per cell).
-        _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+        cell_of, count = _groups(ci)
         if count.max() < 2:
             return uy, uz, peak, w, ci
         rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
@@ -1067,11 +1090,11 @@ class RadarProcessor:
             uy, uz, peak, w, ci, x, rho, rank = (uy[several], uz[several], peak[several],
                                                  w[:, several], ci[several], x[several],
                                                  rho[several], rank[several])
-            _, cell_of = np.unique(ci, return_inverse=True)
+            cell_of = _groups(ci)[0]
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
-            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            starts = np.flatnonzero(_firsts(cell_of))
             top = np.maximum.reduceat(pw, starts)
             ok = (pw >= floor[ci]) & (pw >= top[cell_of] * self._angle_dynamic)
             if it > 0:
@@ -1080,14 +1103,14 @@ class RadarProcessor:
             ok[rank == 0] = True
             uy, uz, peak, w, ci, x, rho, amps = (uy[ok], uz[ok], peak[ok], w[:, ok], ci[ok],
                                                  x[ok], rho[ok], amps[ok])
-            _, cell_of, count = np.unique(ci, return_inverse=True, return_counts=True)
+            cell_of, count = _groups(ci)
             rank = np.arange(ci.size) - np.concatenate([[0], np.cumsum(count)[:-1]])[cell_of]
             multi = count[cell_of] > 1
             if not multi.any() or it == 2:
                 break
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             model = np.conj(w) * amps[None, :]                          # (M, P) fitted sources
-            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1]])
+            starts = np.flatnonzero(_firsts(cell_of))
             total = np.add.reduceat(model.T, starts, axis=0)            # peaks grouped by cell
             xp = (x - total[cell_of] + model.T)[multi]                  # vector less the others
             j = np.flatnonzero(multi)
@@ -1100,8 +1123,8 @@ class RadarProcessor:
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
         if lone is not None:
-            order = np.argsort(np.r_[lone[4], ci], kind="stable")
-            uy, uz, peak, ci = (np.r_[a, b][order] for a, b in zip(
+            order = np.argsort(np.concatenate((lone[4], ci)), kind="stable")
+            uy, uz, peak, ci = (np.concatenate((a, b))[order] for a, b in zip(
                 (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
             w = np.concatenate([lone[3], w], axis=1)[:, order]
         return uy, uz, peak, w, ci
@@ -1136,8 +1159,11 @@ class RadarProcessor:
             u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
             sq, cyy, cyz, czz, ref = self._near_terms
             # (cyy = t_y² + r_y²: one phase factor per TX and one per RX, not per element)
-            ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
-            ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+            if self._near_factors is None:      # (the array's: found once, not per frame)
+                ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
+                ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+                self._near_factors = ty2, it, ry2, ir
+            ty2, it, ry2, ir = self._near_factors
             # (only the deferred peaks: the primaries' bound is not used)
             bound[:], top[:] = np.inf, 0.0
             j = np.flatnonzero(deferred)
@@ -1185,7 +1211,7 @@ class RadarProcessor:
         total = np.add.reduceat(model.T, starts, axis=0)                # (C, M)
         first = x[starts]                                               # each cell's vector
         rss = np.sum(np.abs(first - total) ** 2, axis=1)                # (C,)
-        count = np.diff(np.r_[starts, cell_of.size])
+        count = np.diff(np.append(starts, cell_of.size))
         nu = np.maximum(m - 2 * count, 1)
         return (self._f_threshold[nu] * rss / nu / m)[cell_of]
 
@@ -1231,7 +1257,7 @@ class RadarProcessor:
         kb = self._beam_kernels
         if kb is not None and cell_of.size and np.all(np.diff(cell_of) >= 0):
             # (the peaks of a cell are consecutive, as _resolve_peaks keeps them)
-            starts = np.flatnonzero(np.r_[True, cell_of[1:] != cell_of[:-1], True])
+            starts = np.flatnonzero(_firsts(cell_of, end=True))
             amps = np.empty(cell_of.size, dtype=np.complex128)
             kb["k"].joint_amplitudes(_c64(x), _c64(w), starts.astype(np.int64), amps)
             return amps
@@ -1241,7 +1267,7 @@ class RadarProcessor:
         if not multi.any():
             return out
         x, w, rank = x[multi], w[:, multi], rank[multi]
-        _, cell_of = np.unique(cell_of[multi], return_inverse=True)
+        cell_of = _groups(cell_of[multi])[0]
         ncell = int(cell_of.max()) + 1
         nmax = int(rank.max()) + 1
         m = w.shape[0]
@@ -1482,6 +1508,33 @@ class RadarProcessor:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
                    if getattr(self.settings, f.name) != f.default}
         return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+def _groups(ci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(ci, return_inverse=True, return_counts=True)[1:]`` without the sort where
+    ``ci`` is already non-decreasing (the peaks' cells always are: :func:`~coloradar.dsp.
+    angle.azimuth_peaks` returns them by cell, and only masks follow)."""
+    ci = np.asarray(ci)
+    if ci.size == 0 or np.any(ci[1:] < ci[:-1]):
+        _, inv, cnt = np.unique(ci, return_inverse=True, return_counts=True)
+        return inv.reshape(-1), cnt
+    new = _firsts(ci)
+    cell_of = np.cumsum(new) - 1
+    return cell_of, np.diff(np.append(np.flatnonzero(new), ci.size))
+
+
+def _firsts(ci: np.ndarray, end: bool = False) -> np.ndarray:
+    """bool ``(N,)`` (``end``: ``(N + 1,)``, True last): True where ``ci`` starts a run of
+    equal values (``np.r_[True, ci[1:] != ci[:-1]]``, without ``np.r_``'s parsing cost,
+    which counts at a few dozen peaks per frame)."""
+    ci = np.asarray(ci)
+    n = max(ci.size, 1)                                 # (as np.r_: [True] when empty)
+    out = np.empty(n + int(end), dtype=bool)
+    out[0] = True
+    np.not_equal(ci[1:], ci[:-1], out=out[1:n])
+    if end:
+        out[-1] = True
+    return out
 
 
 def _f64(a: Any) -> np.ndarray:
