@@ -361,7 +361,7 @@ def main() -> None:
         print(f"  point cloud / heatmap           {t['ADC -> point cloud'] / hm:6.2f}x   "
               f"(goal <= 1)")
         if near is not None:
-            print(f"  near-field point cloud / heatmap{t[NF_PC] / hm:6.2f}x   (goal <= 1; "
+            print(f"  near-field point cloud / heatmap{t[NF_PC] / t[NF_HM]:6.2f}x   (goal <= 1; "
                   f"{np.mean([len(proc_nf.pointcloud(a)) for a in near[1]]):.0f} points/frame)")
         if args.only == "all":
             detection_costs(calib, fr, args.repeat)
