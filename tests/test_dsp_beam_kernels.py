@@ -140,6 +140,25 @@ def test_beam_neighbourhood_matches_the_definition(name):
                 assert got[p, i, k] == pytest.approx(want, rel=1e-5, abs=1e-9 * want + 1e-12)
 
 
+def _check_engines_agree(fast, ref, synth, calib, rng, seed, k, ranges, max_az):
+    """``k`` targets (two at one range and range rate, mirrored in azimuth) synthesised by
+    ``synth``: both engines give the same points to float32 rounding (sub-millimetre)."""
+    rng_m = rng.uniform(*ranges, k)
+    az = rng.uniform(-max_az, max_az, k)
+    el = rng.uniform(-0.2, 0.2, k)
+    pos = rng_m[:, None] * np.column_stack([np.cos(el) * np.cos(az),
+                                            np.cos(el) * np.sin(az), np.sin(el)])
+    pos[1] = pos[0] * [1, -1, 1]                                  # same range, mirrored azimuth
+    vel = rng.uniform(-0.5, 0.5, (k, 1)) * pos / rng_m[:, None]
+    vel[1] = vel[0] * [1, -1, 1]
+    adc = synth(calib, pos, vel, 200.0 * rng_m**2, noise_std=10.0, rng=seed)
+    a, b = fast.pointcloud(adc), ref.pointcloud(adc)
+    assert len(a) == len(b) >= k - 1
+    np.testing.assert_allclose(a[:, :3], b[:, :3], atol=1e-3)
+    np.testing.assert_allclose(a[:, 3], b[:, 3], rtol=2e-3)
+    np.testing.assert_allclose(a[:, 4], b[:, 4], atol=1e-4)
+
+
 @pytest.mark.parametrize("name", RADARS)
 def test_point_clouds_of_both_engines_agree(name):
     """Simulated frames with several targets (two in one range–Doppler cell): the numba
@@ -149,20 +168,7 @@ def test_point_clouds_of_both_engines_agree(name):
     fast, ref = RadarProcessor(calib, engine="numba"), RadarProcessor(calib, engine="numpy")
     for f in range(3):
         k = 6
-        rng_m = rng.uniform(2.0, 8.0, k)
-        az = rng.uniform(-1.0, 1.0, k)
-        el = rng.uniform(-0.2, 0.2, k)
-        pos = rng_m[:, None] * np.column_stack([np.cos(el) * np.cos(az),
-                                                np.cos(el) * np.sin(az), np.sin(el)])
-        pos[1] = pos[0] * [1, -1, 1]                              # same range, mirrored azimuth
-        vel = rng.uniform(-0.5, 0.5, (k, 1)) * pos / rng_m[:, None]
-        vel[1] = vel[0] * [1, -1, 1]
-        adc = synthesize_adc(calib, pos, vel, 200.0 * rng_m**2, noise_std=10.0, rng=f)
-        a, b = fast.pointcloud(adc), ref.pointcloud(adc)
-        assert len(a) == len(b) >= k - 1
-        np.testing.assert_allclose(a[:, :3], b[:, :3], atol=1e-3)
-        np.testing.assert_allclose(a[:, 3], b[:, 3], rtol=2e-3)
-        np.testing.assert_allclose(a[:, 4], b[:, 4], atol=1e-4)
+        _check_engines_agree(fast, ref, synthesize_adc, calib, rng, f, k, (2.0, 8.0), 1.0)
 
 
 @pytest.mark.parametrize("name", RADARS)
@@ -180,20 +186,7 @@ def test_point_clouds_of_both_engines_agree_with_focusing(name):
     assert fast._focus and ref._focus
     for f in range(2):
         k = 5
-        rng_m = rng.uniform(1.5, 5.0, k)
-        az = rng.uniform(-0.9, 0.9, k)
-        el = rng.uniform(-0.2, 0.2, k)
-        pos = rng_m[:, None] * np.column_stack([np.cos(el) * np.cos(az),
-                                                np.cos(el) * np.sin(az), np.sin(el)])
-        pos[1] = pos[0] * [1, -1, 1]                              # same range, mirrored azimuth
-        vel = rng.uniform(-0.5, 0.5, (k, 1)) * pos / rng_m[:, None]
-        vel[1] = vel[0] * [1, -1, 1]
-        adc = exact_adc(calib, pos, vel, 200.0 * rng_m**2, noise_std=10.0, rng=f)
-        a, b = fast.pointcloud(adc), ref.pointcloud(adc)
-        assert len(a) == len(b) >= k - 1
-        np.testing.assert_allclose(a[:, :3], b[:, :3], atol=1e-3)
-        np.testing.assert_allclose(a[:, 3], b[:, 3], rtol=2e-3)
-        np.testing.assert_allclose(a[:, 4], b[:, 4], atol=1e-4)
+        _check_engines_agree(fast, ref, exact_adc, calib, rng, f, k, (1.5, 5.0), 0.9)
 
 
 def _focused_bound_case(seed: int, near: bool):

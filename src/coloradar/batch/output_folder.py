@@ -62,7 +62,7 @@ from ..errors import (
     OutputExistsError,
     WriteError,
 )
-from ..formats.atomic import is_partial_file, output_dir_error, write_text_if_changed
+from ..formats.atomic import clean_partial_files, output_dir_error, write_text_if_changed
 from ..formats.layout import COLORADAR, LAYOUTS, PROCESS_PRODUCTS
 from ..formats.source import read_file_text
 from ..formats.text import format_timestamps
@@ -112,23 +112,6 @@ def _make_dir(path: Path) -> None:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise output_dir_error(path, exc) from None
-
-
-def _remove_partials(folders: Iterable[Path], name: str | None = None) -> None:
-    """Delete what interrupted atomic writes left directly inside ``folders`` (only those of
-    file ``name`` when given): never a valid file, and never to be mistaken for one."""
-    for folder in folders:
-        try:
-            entries = list(os.scandir(folder))
-        except FileNotFoundError:
-            continue
-        for e in entries:
-            if (is_partial_file(e.name) and e.is_file()
-                    and (name is None or e.name.startswith(f".{name}."))):
-                try:
-                    os.unlink(e.path)
-                except FileNotFoundError:
-                    pass
 
 
 def is_valid_size(product: str, size: int, heatmap_bytes: int) -> bool:
@@ -460,7 +443,7 @@ class ProcessedRun:
                 folders += [folder, data]
                 entries[f"{rp.radar}/{p}"] = {"settings": rp.settings,
                                               "calibration_sha256": rp.calibration_sha256}
-        _remove_partials(folders)
+        clean_partial_files(folders)
         inputs = dict((manifest or {}).get("inputs") or {})  # radars not processed now stay
         for rp in radars:
             if not overwrite:
@@ -637,7 +620,7 @@ class JobOutputs:
                 return None
             path = Path(report_path)
             _make_dir(path.parent)
-            _remove_partials([path.parent], path.name)
+            clean_partial_files([path.parent], path.name)
             write_text_if_changed(path, report)
             return path
         finally:

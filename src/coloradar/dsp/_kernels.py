@@ -671,6 +671,23 @@ def _log_parabola(v0: float, v1: float, v2: float) -> float:  # pragma: no cover
 
 
 @_jit(nogil=True)
+def _row_groups(row: Any, n_rows: int) -> tuple[Any, Any]:  # pragma: no cover - compiled
+    """Elements grouped by elevation row, in their order within a row (a counting sort):
+    ``order`` int64 ``(M,)`` and the start of each row in it, ``row_start`` ``(rows + 1,)``."""
+    row_start = np.zeros(n_rows + 1, np.int64)
+    for m in range(row.size):
+        row_start[row[m] + 1] += 1
+    for q in range(n_rows):
+        row_start[q + 1] += row_start[q]
+    fill = row_start[:-1].copy()
+    order = np.empty(row.size, np.int64)
+    for m in range(row.size):
+        order[fill[row[m]]] = m
+        fill[row[m]] += 1
+    return order, row_start
+
+
+@_jit(nogil=True)
 def elevation_search(x: Any, ca: float, az_pos: Any, row: Any, row_steer: Any, el_sines: Any,
                      uy: Any, rho: float, out_uz: Any, out_power: Any) -> None:  # pragma: no cover
     """Strongest elevation beam of each vector ``x`` complex64 ``(P, M)`` along its azimuth
@@ -683,12 +700,7 @@ def elevation_search(x: Any, ca: float, az_pos: Any, row: Any, row_steer: Any, e
     n_rows, ne = row_steer.shape
     pa = np.empty(np.max(az_pos) + 1, np.complex128)
     acc = np.empty(n_rows, np.complex128)
-    order = np.argsort(row, kind="mergesort")      # elements grouped by row
-    row_start = np.zeros(n_rows + 1, np.int64)
-    for m in range(m_n):
-        row_start[row[m] + 1] += 1
-    for q in range(n_rows):
-        row_start[q + 1] += row_start[q]
+    order, row_start = _row_groups(row, n_rows)
     sr = np.empty((n_rows, ne))
     si = np.empty((n_rows, ne))
     for q in range(n_rows):
@@ -930,12 +942,7 @@ def secondary_bound_focused(x: Any, w_first: Any, first: Any, uy: Any, rho: Any,
     """
     p_n, m_n = x.shape
     pa = np.empty(np.max(az_pos) + 1, np.complex128)
-    order = np.argsort(row, kind="mergesort")      # elements grouped by row
-    row_start = np.zeros(n_rows + 1, np.int64)
-    for m in range(m_n):
-        row_start[row[m] + 1] += 1
-    for q in range(n_rows):
-        row_start[q + 1] += row_start[q]
+    order, row_start = _row_groups(row, n_rows)
     r = np.empty(m_n, np.complex128)
     re = np.empty(m_n, np.complex128)          # r_m·exp(−jk·sq_m/(2ρ) + j·ref_m), per cell
     et = np.empty(ty2.size, np.complex128)
