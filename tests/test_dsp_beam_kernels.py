@@ -272,3 +272,22 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
         assert exact.max() <= bound_cs[k], (k, exact.max(), bound_cs[k])
         worst = max(worst, exact.max() / bound[k])
     assert worst > 0.05          # (a bound, not a blanket: some secondary comes close)
+
+
+def test_peak_grouping_helpers_match_numpy_references():
+    """The processor's grouping of peaks by cell gives what ``np.unique`` and ``np.r_`` give,
+    on sorted and unsorted cells, with and without repeats, and empty."""
+    from coloradar.dsp.processor import _firsts, _groups
+
+    rng = np.random.default_rng(3)
+    cases = [np.zeros(0, dtype=np.int64), np.array([4]), np.array([2, 2, 2])]
+    cases += [np.sort(rng.integers(0, n, n)) for n in (2, 5, 40)]
+    cases += [rng.integers(0, 6, 12) for _ in range(3)]              # not sorted
+    for ci in cases:
+        np.testing.assert_array_equal(_firsts(ci), np.r_[True, ci[1:] != ci[:-1]])
+        np.testing.assert_array_equal(_firsts(ci, end=True),
+                                      np.r_[True, ci[1:] != ci[:-1], True])
+        _, inv, cnt = np.unique(ci, return_inverse=True, return_counts=True)
+        cell_of, count = _groups(ci)
+        np.testing.assert_array_equal(cell_of, inv.reshape(-1))
+        np.testing.assert_array_equal(count, cnt)

@@ -506,7 +506,11 @@ class RadarProcessor:
         self._beam_kernels = self._init_beam_kernels()
         # (focusing phase as a quadratic in the sines, for the secondary peaks' bound)
         self._near_terms = self._near.planar_terms() if self._focus else None
-        self._near_factors: tuple[np.ndarray, ...] | None = None
+        # (its per-TX and per-RX factors: cyy = t_y² + r_y², one phase per TX and one per RX)
+        self._near_factors = (
+            np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
+            + np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
+            if self._near_terms is not None else None)
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
@@ -1159,10 +1163,7 @@ class RadarProcessor:
             u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
             sq, cyy, cyz, czz, ref = self._near_terms
             # (cyy = t_y² + r_y²: one phase factor per TX and one per RX, not per element)
-            if self._near_factors is None:      # (the array's: found once, not per frame)
-                ty2, it = np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
-                ry2, ir = np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
-                self._near_factors = ty2, it, ry2, ir
+            assert self._near_factors is not None
             ty2, it, ry2, ir = self._near_factors
             # (only the deferred peaks: the primaries' bound is not used)
             bound[:], top[:] = np.inf, 0.0
