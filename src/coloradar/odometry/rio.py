@@ -231,6 +231,12 @@ def _imu_frame_velocity(track: EgoVelocityTrack, k: int, ekf: ErrorStateEKF, t_i
     return r_ir @ track.velocity[k] - np.cross(w, t_ir)
 
 
+def _radar_noise(cov: np.ndarray, scale: float, floor: float) -> np.ndarray:
+    """Covariance ``(3, 3)`` [m²/s²] of a radar ego-velocity measurement: the RANSAC one
+    ``cov`` times ``scale²`` plus ``floor²`` on each axis (:class:`RioConfig`)."""
+    return scale**2 * cov + floor**2 * np.eye(3)
+
+
 def _consistent(track: EgoVelocityTrack, k: int, j: int, ekf: ErrorStateEKF, t_ir: np.ndarray,
                 r_ir: np.ndarray, td: float, floor: float, gate: float, scale: float = 1.0
                 ) -> bool:
@@ -253,7 +259,8 @@ def _consistent(track: EgoVelocityTrack, k: int, j: int, ekf: ErrorStateEKF, t_i
     g = f - np.cross(w, uk)
     sign = 1.0 if j > k else -1.0
     integral = sign * trapezoid(g, tg, axis=0)
-    cov = scale**2 * (track.covariance[k] + track.covariance[j]) + 2 * floor**2 * np.eye(3)
+    cov = (_radar_noise(track.covariance[k], scale, floor)
+           + _radar_noise(track.covariance[j], scale, floor))
     sigma = float(np.sqrt(np.max(np.linalg.eigvalsh(cov))))
     return bool(np.linalg.norm(uj - uk - integral) <= _G0 * (tb - ta) + gate * sigma)
 
@@ -477,8 +484,8 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
                 # The frame's time has passed (its offset was corrected since it was queued):
                 # the prediction at `want`, to first order (the offset column is dy/dt).
                 y = y + (want - tau) * H[:, ekf.td_index(r)]
-            C = cfg.velocity_noise_scale**2 * tr.covariance[k] \
-                + np.eye(3) * cfg.velocity_noise_floor**2
+            C = _radar_noise(tr.covariance[k], cfg.velocity_noise_scale,
+                             cfg.velocity_noise_floor)
             if planar[r]:
                 # v_z is not measured: the planar model's assumption v_z = 0, loosely.
                 C[2, :] = C[:, 2] = 0.0
