@@ -24,10 +24,10 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "gather_rows",
-           "joint_amplitudes", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "power", "prepare_chirps", "secondary_bound", "secondary_bound_focused",
-           "secondary_residual", "source_pairs",
+__all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "focus_multiply",
+           "gather_rows", "joint_amplitudes", "joint_refine", "newton_refine",
+           "peak_over_doppler", "peak_over_doppler_planar", "power", "prepare_chirps",
+           "secondary_bound", "secondary_bound_focused", "secondary_residual", "source_pairs",
            "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
@@ -783,6 +783,47 @@ def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d:
                 out[p, i, k] = (v.real * v.real + v.imag * v.imag) / m2
 
 
+@numba.njit(inline="always")
+def _cell_amplitudes(x: Any, row: int, w: Any, cols: Any, n: int,
+                     out: Any) -> None:  # pragma: no cover - compiled
+    # Least-squares amplitudes of the sources conj(w[:, cols[i]]), i < n, in the vector
+    # x[row]: a lone source its beam value, several the normal equations (Gaussian
+    # elimination with partial pivoting); written to out[cols[i]].
+    m_n = x.shape[1]
+    if n == 1:
+        acc = 0.0 + 0.0j
+        for m in range(m_n):
+            acc += x[row, m] * w[m, cols[0]]
+        out[cols[0]] = acc / m_n
+        return
+    g = np.zeros((n, n + 1), np.complex128)              # [Gram | right-hand side]
+    for i in range(n):
+        for m in range(m_n):
+            wi = complex(w[m, cols[i]])
+            g[i, n] += wi * x[row, m]
+            for j in range(i, n):
+                g[i, j] += wi * complex(w[m, cols[j]]).conjugate()
+        for j in range(i):
+            g[i, j] = g[j, i].conjugate()
+    for col in range(n):
+        piv = col
+        for i in range(col + 1, n):
+            if abs(g[i, col]) > abs(g[piv, col]):
+                piv = i
+        if piv != col:
+            for j in range(n + 1):
+                g[col, j], g[piv, j] = g[piv, j], g[col, j]
+        for i in range(col + 1, n):
+            f = g[i, col] / g[col, col]
+            for j in range(col, n + 1):
+                g[i, j] -= f * g[col, j]
+    for i in range(n - 1, -1, -1):
+        v = g[i, n]
+        for j in range(i + 1, n):
+            v -= g[i, j] * out[cols[j]]
+        out[cols[i]] = v / g[i, i]
+
+
 @_jit(nogil=True)
 def joint_amplitudes(x: Any, w: Any, starts: Any, out: Any) -> None:  # pragma: no cover
     """Least-squares amplitudes of every cell's sources: the peaks ``starts[c] …
@@ -791,41 +832,159 @@ def joint_amplitudes(x: Any, w: Any, starts: Any, out: Any) -> None:  # pragma: 
     columns ``conj(w[:, p])`` (complex64 ``(M, P)``). A lone source gets its beam value
     ``Σ_m x_m w_m / M``; several are solved jointly (normal equations, Gaussian elimination
     with partial pivoting). Writes complex128 ``out`` ``(P,)``."""
-    m_n = x.shape[1]
     for c in range(starts.size - 1):
         s0, n = starts[c], starts[c + 1] - starts[c]
-        if n == 1:
-            acc = 0.0 + 0.0j
+        _cell_amplitudes(x, s0, w, np.arange(s0, s0 + n), n, out)
+
+
+@_jit(nogil=True)
+def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any, floor: Any,
+                 dyn: float, f_threshold: Any, refine: bool, ca: float, cb: float,
+                 az_pos: Any, el_pos: Any, row: Any, row_steer: Any, el_sines: Any,
+                 grid_rho: float, step_y: float, step_z: float, focus: bool, t_yz: Any,
+                 t_sq: Any, it: Any, r_yz: Any, r_sq: Any, ir: Any, ref: Any,
+                 wavenumber: float, alive: Any) -> None:  # pragma: no cover - compiled
+    """The joint refinement of cells with several sources
+    (:meth:`coloradar.dsp.processor.RadarProcessor._resolve_peaks`'s loop, in one call).
+
+    Peaks ``p`` (``ci`` non-decreasing: a cell's peaks consecutive, its strongest first) with
+    the cell's vector ``x[p]`` complex64 ``(P, M)``, weights ``w`` complex64 ``(M, P)``,
+    sines ``uy, uz``, beam powers ``peak``, focusing ranges ``rho`` [m] and the cell's noise
+    ``floor`` (float64 ``(P,)`` each). Three rounds: the cell's joint least-squares
+    amplitudes; a source is kept while its power reaches the floor, ``dyn`` times the cell's
+    strongest and (from the second round) the F-test floor of what the fit leaves
+    (``f_threshold[ν]·RSS/ν/M``, ``ν = max(M − 2n, 1)``); the strongest source of a cell
+    always stays. Between rounds each source of a cell that still has several gets its
+    elevation (:func:`elevation_search`) and, with ``refine``, Newton steps
+    (:func:`newton_refine`) on the vector less the other sources' fit, and new weights
+    (:func:`steer_columns`); ``focus``: those vectors and weights carry the near-field
+    phases (:func:`focus_multiply`'s tables). At the end the power of every source of a
+    cell with several is its joint amplitude's. Updates ``uy, uz, peak, w`` in place and
+    writes ``alive`` (bool ``(P,)``): the peaks kept."""
+    p_n, m_n = x.shape
+    alive[:] = True
+    amps = np.empty(p_n, np.complex128)
+    cols = np.empty(p_n, np.int64)
+    # cell boundaries (cells never change; only which of their peaks are alive)
+    starts = np.empty(p_n + 1, np.int64)
+    n_cells = 0
+    for p in range(p_n):
+        if p == 0 or ci[p] != ci[p - 1]:
+            starts[n_cells] = p
+            n_cells += 1
+    starts[n_cells] = p_n
+    count = np.zeros(n_cells, np.int64)
+    total = np.empty(m_n, np.complex128)
+    for rnd in range(3):
+        for c in range(n_cells):
+            n = 0
+            for p in range(starts[c], starts[c + 1]):
+                if alive[p]:
+                    cols[n] = p
+                    n += 1
+            _cell_amplitudes(x, starts[c], w, cols, n, amps)
+            top = 0.0
+            for i in range(n):
+                v = abs(amps[cols[i]])           # (|·| then squared, as numpy's abs(·)**2)
+                top = max(top, v * v)
+            rf = 0.0
+            if rnd > 0:
+                total[:] = 0.0
+                for i in range(n):
+                    q = cols[i]
+                    for m in range(m_n):
+                        total[m] += complex(w[m, q]).conjugate() * amps[q]
+                rss = 0.0
+                for m in range(m_n):
+                    v = abs(complex(x[starts[c], m]) - total[m])
+                    rss += v * v
+                nu = max(m_n - 2 * n, 1)
+                rf = f_threshold[nu] * rss / nu / m_n
+            kept = 0
+            for i in range(n):
+                q = cols[i]
+                v = abs(amps[q])
+                pw = v * v
+                if i > 0 and not (pw >= floor[q] and pw >= top * dyn and pw >= rf):
+                    alive[q] = False
+                else:
+                    kept += 1
+            count[c] = kept
+        multi = False
+        for c in range(n_cells):
+            multi = multi or count[c] > 1
+        if not multi or rnd == 2:
+            break
+        # each source of a cell with several: the cell's vector less the others' fit
+        k_n = 0
+        for c in range(n_cells):
+            if count[c] > 1:
+                for p in range(starts[c], starts[c + 1]):
+                    if alive[p]:
+                        k_n += 1
+        xp = np.empty((k_n, m_n), np.complex64)
+        idx = np.empty(k_n, np.int64)
+        k = 0
+        for c in range(n_cells):
+            if count[c] < 2:
+                continue
+            n = 0
+            for p in range(starts[c], starts[c + 1]):
+                if alive[p]:
+                    cols[n] = p
+                    n += 1
+            _cell_amplitudes(x, starts[c], w, cols, n, amps)
+            total[:] = 0.0
+            for i in range(n):
+                q = cols[i]
+                for m in range(m_n):
+                    total[m] += complex(w[m, q]).conjugate() * amps[q]
+            for i in range(n):
+                q = cols[i]
+                for m in range(m_n):
+                    xp[k, m] = (complex(x[q, m]) - total[m]
+                                + complex(w[m, q]).conjugate() * amps[q])
+                idx[k] = q
+                k += 1
+        ky, kz, kr = uy[idx], np.zeros(k_n), rho[idx]
+        xe = xp.copy()
+        if focus:
+            _focus_multiply_jit(xe, ky, kz, kr, t_yz, t_sq, it, r_yz, r_sq, ir, ref,
+                                wavenumber, True)
+        out_z, out_p = np.empty(k_n), np.empty(k_n)
+        _elevation_search_jit(xe, ca, az_pos, row, row_steer, el_sines, ky, grid_rho, out_z,
+                              out_p)
+        kz = out_z
+        if refine:
+            if focus:
+                _focus_multiply_jit(xp, ky, kz, kr, t_yz, t_sq, it, r_yz, r_sq, ir, ref,
+                                    wavenumber, True)
+            ny, nz, npw = np.empty(k_n), np.empty(k_n), np.empty(k_n)
+            _newton_refine_jit(xp, ca, cb, az_pos, el_pos, ky, kz, step_y, step_z, 2, True,
+                               ny, nz, npw)
+            ky, kz = ny, nz
+        wk = np.empty((m_n, k_n), np.complex64)
+        _steer_columns_jit(ca, cb, az_pos, el_pos, ky, kz, wk)
+        if focus:
+            _focus_multiply_jit(wk, ky, kz, kr, t_yz, t_sq, it, r_yz, r_sq, ir, ref,
+                                wavenumber, False)
+        for k in range(k_n):
+            q = idx[k]
+            uy[q], uz[q] = ky[k], kz[k]
             for m in range(m_n):
-                acc += x[s0, m] * w[m, s0]
-            out[s0] = acc / m_n
+                w[m, q] = wk[m, k]
+    for c in range(n_cells):
+        if count[c] < 2:
             continue
-        g = np.zeros((n, n + 1), np.complex128)          # [Gram | right-hand side]
+        n = 0
+        for p in range(starts[c], starts[c + 1]):
+            if alive[p]:
+                cols[n] = p
+                n += 1
+        _cell_amplitudes(x, starts[c], w, cols, n, amps)
         for i in range(n):
-            for m in range(m_n):
-                wi = complex(w[m, s0 + i])
-                g[i, n] += wi * x[s0, m]
-                for j in range(i, n):
-                    g[i, j] += wi * complex(w[m, s0 + j]).conjugate()
-            for j in range(i):
-                g[i, j] = g[j, i].conjugate()
-        for col in range(n):
-            piv = col
-            for i in range(col + 1, n):
-                if abs(g[i, col]) > abs(g[piv, col]):
-                    piv = i
-            if piv != col:
-                for j in range(n + 1):
-                    g[col, j], g[piv, j] = g[piv, j], g[col, j]
-            for i in range(col + 1, n):
-                f = g[i, col] / g[col, col]
-                for j in range(col, n + 1):
-                    g[i, j] -= f * g[col, j]
-        for i in range(n - 1, -1, -1):
-            v = g[i, n]
-            for j in range(i + 1, n):
-                v -= g[i, j] * out[s0 + j]
-            out[s0 + i] = v / g[i, i]
+            v = abs(amps[cols[i]])
+            peak[cols[i]] = v * v
 
 
 @_jit(nogil=True)
@@ -1067,6 +1226,50 @@ def source_pairs(b: Any, i1: Any, total: Any, rss1: Any, cross: Any, gain: Any, 
         out[n] = r
 
 
+@_jit(nogil=True)
+def focus_multiply(x: Any, uy: Any, uz: Any, rho: Any, t_yz: Any, t_sq: Any, it: Any,
+                   r_yz: Any, r_sq: Any, ir: Any, ref: Any, wavenumber: float,
+                   by_row: bool) -> None:  # pragma: no cover - compiled
+    """``x[·, m] *= exp(jθ_m)`` in place: the near-field focusing phase of an array in the
+    y–z plane (:meth:`coloradar.dsp.angle.NearField.focus_sines`), at sines
+    ``(uy[p], uz[p])`` (scaled onto the visible disc's edge where beyond it) and range
+    ``rho[p]`` [m]. ``x`` complex64 ``(P, M)`` with ``by_row``, else ``(M, P)``.
+
+    ``θ_m = −k/(2ρ)·(|t|² − (t·u)² + |r|² − (r·u)²) + ref_m`` is a TX term plus an RX term
+    plus a constant, so ``exp(jθ_m)`` is a product of one phasor per TX position
+    (``t_yz`` float64 ``(T, 2)``, ``t_sq`` ``(T,)`` = ``|t|²``, element ``m``'s at
+    ``it[m]``), one per RX position (``r_yz``, ``r_sq``, ``ir``) and ``ref`` complex128
+    ``(M,)`` (``exp(j·ref_m)``): a sine and cosine per antenna position (28 on the cascade)
+    instead of per element (134), in one pass with no temporaries. (float64 phases; numpy's
+    are float32: they agree to float32 rounding.)"""
+    m_n = it.size
+    et = np.empty(t_sq.size, np.complex128)
+    er = np.empty(r_sq.size, np.complex128)
+    for p in range(uy.size):
+        y = uy[p]
+        z = uz[p]
+        s2 = y * y + z * z
+        if s2 > 1.0:
+            sc = 1.0 / math.sqrt(s2)
+            y *= sc
+            z *= sc
+        a = -wavenumber / (2.0 * max(rho[p], 1e-3))
+        for i in range(t_sq.size):
+            d = t_yz[i, 0] * y + t_yz[i, 1] * z
+            th = a * (t_sq[i] - d * d)
+            et[i] = complex(math.cos(th), math.sin(th))
+        for i in range(r_sq.size):
+            d = r_yz[i, 0] * y + r_yz[i, 1] * z
+            th = a * (r_sq[i] - d * d)
+            er[i] = complex(math.cos(th), math.sin(th))
+        if by_row:
+            for m in range(m_n):
+                x[p, m] *= et[it[m]] * er[ir[m]] * ref[m]
+        else:
+            for m in range(m_n):
+                x[m, p] *= et[it[m]] * er[ir[m]] * ref[m]
+
+
 @_jit(nogil=True, fastmath=_FM)
 def power(values: Any, out: Any) -> None:  # pragma: no cover - compiled
     """``out[i] = re² + im²`` of complex values given as interleaved float32 ``(2N,)``;
@@ -1076,6 +1279,12 @@ def power(values: Any, out: Any) -> None:  # pragma: no cover - compiled
         b = values[2 * i + 1]
         out[i] = a * a + b * b
 
+# (the raw dispatchers, for kernels that call them: the names below become wrappers)
+_elevation_search_jit = elevation_search
+_focus_multiply_jit = focus_multiply
+_newton_refine_jit = newton_refine
+_steer_columns_jit = steer_columns
+
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
@@ -1083,8 +1292,10 @@ peak_over_doppler_planar = _Announced(peak_over_doppler_planar)
 prepare_chirps = _Announced(prepare_chirps)
 power = _Announced(power)
 beam_neighbourhood = _Announced(beam_neighbourhood)
+focus_multiply = _Announced(focus_multiply)
 elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)
+joint_refine = _Announced(joint_refine)
 newton_refine = _Announced(newton_refine)
 secondary_bound = _Announced(secondary_bound)
 secondary_bound_focused = _Announced(secondary_bound_focused)

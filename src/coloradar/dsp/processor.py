@@ -511,6 +511,21 @@ class RadarProcessor:
             np.unique(self._near.tx[:, 1] ** 2, return_inverse=True)
             + np.unique(self._near.rx[:, 1] ** 2, return_inverse=True)
             if self._near_terms is not None else None)
+        self._focus_tables = self._planar_focus_tables() if self._near_terms is not None else None
+
+    def _planar_focus_tables(self) -> tuple[np.ndarray, ...]:
+        """The focusing phases' per-position tables for :func:`~._kernels.focus_multiply`:
+        the unique TX and RX positions ``(y, z)`` with their ``|·|²`` and each element's
+        index into them, and ``exp(j·ref_m)`` (the calibration reflector's phases, 1 without
+        a reference)."""
+        def positions(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            yz, idx = np.unique(p[:, 1:], axis=0, return_inverse=True)
+            return (np.ascontiguousarray(yz, dtype=np.float64), (yz**2).sum(axis=1),
+                    idx.reshape(-1).astype(np.int64))
+        assert self._near_terms is not None
+        ref = self._near_terms[4]
+        return (*positions(self._near.tx), *positions(self._near.rx),
+                np.exp(1j * ref).astype(np.complex128))
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
@@ -994,12 +1009,30 @@ class RadarProcessor:
             w = np.empty((self.detection_grid.num_elements, np.size(uy)), dtype=np.complex64)
             kb["k"].steer_columns(kb["ca"], kb["cb"], kb["az"], kb["el"], _f64(uy), _f64(uz), w)
             if self._focus:
-                w *= self._near.focus_sines(uy, uz, rho)
+                w = self._focused(w, uy, uz, rho, rows=False, copy=False)
             return w
         w = steering(self.detection_grid, uy, uz)
         if self._focus:
             w = w * self._near.focus_sines(uy, uz, rho)
         return w
+
+    def _focused(self, x: np.ndarray, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray,
+                 rows: bool = True, copy: bool = True) -> np.ndarray:
+        """``x`` times the near-field focusing phases (:meth:`NearField.focus_sines`) at sines
+        ``(uy, uz)`` and ranges ``rho`` (``(K,)`` each); ``x`` complex ``(K, M)`` with
+        ``rows``, else ``(M, K)``; ``copy=False`` may multiply ``x`` (complex64) in place.
+        Compiled where the array is planar (the cascade), numpy otherwise."""
+        kb, tables = self._beam_kernels, self._focus_tables
+        if kb is None or tables is None:
+            f = self._near.focus_sines(uy, uz, rho, transpose=rows)
+            if copy:
+                return x * f
+            x *= f
+            return x
+        out = np.array(x, dtype=np.complex64, order="C", copy=True) if copy else x
+        kb["k"].focus_multiply(out, _f64(uy), _f64(uz), _f64(rho), *tables,
+                               self._near.wavenumber, rows)
+        return out
 
     def _resolve_peaks(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray, uz: np.ndarray,
                        peak: np.ndarray, rho: np.ndarray, floor: np.ndarray
@@ -1031,7 +1064,7 @@ class RadarProcessor:
             kb = self._beam_kernels
             if kb is not None:
                 if self._focus:
-                    xv = xv * self._near.focus_sines(uy0, uz0, rr, transpose=True)
+                    xv = self._focused(xv, uy0, uz0, rr)
                 out = np.empty((3, np.size(uy0)))
                 kb["k"].newton_refine(_c64(xv), kb["ca"], kb["cb"], kb["az"], kb["el"],
                                       _f64(uy0), _f64(uz0), step[0], step[1], 2, True, out[0],
@@ -1047,12 +1080,22 @@ class RadarProcessor:
         if refine and primary.any():
             uy[primary], uz[primary], peak[primary] = newton(x[primary], uy[primary],
                                                              uz[primary], rho[primary])
+        wp = None
         if self._beam_kernels is not None:
             deferred = np.isnan(uz) & ~primary     # secondaries without their elevation yet
             if deferred.any():
-                uy, uz, peak, ci, x, rho, primary = self._screen_secondaries(
+                uy, uz, peak, ci, x, rho, primary, wp = self._screen_secondaries(
                     x, ci, uy, uz, peak, rho, floor, primary, deferred)
-        w = self._steer(uy, uz, rho)                                    # (M, P)
+        if wp is None:
+            w = self._steer(uy, uz, rho)                                # (M, P)
+        else:
+            # the primaries' weights were made for the screening (each column depends on
+            # its own peak only: the same values); only the secondaries' are new
+            w = np.empty((wp.shape[0], ci.size), dtype=wp.dtype)
+            w[:, primary] = wp
+            if not primary.all():
+                sec = ~primary
+                w[:, sec] = self._steer(uy[sec], uz[sec], rho[sec])
         if primary.all():
             return uy, uz, peak, w, ci
         # amplitude of each cell's strongest source and its response in the other directions
@@ -1095,6 +1138,22 @@ class RadarProcessor:
                                                  w[:, several], ci[several], x[several],
                                                  rho[several], rank[several])
             cell_of = _groups(ci)[0]
+        kb = self._beam_kernels
+        if kb is not None and (not self._focus or self._focus_tables is not None):
+            # the loop below in one compiled call (the same steps and kernels)
+            alive = np.empty(ci.size, dtype=bool)
+            tables = self._focus_tables if self._focus else _NO_FOCUS
+            assert tables is not None
+            w = np.ascontiguousarray(w, dtype=np.complex64)
+            uy, uz, peak = _f64(uy).copy(), _f64(uz).copy(), _f64(peak).copy()
+            kb["k"].joint_refine(_c64(x), w, uy, uz, peak, ci.astype(np.int64), _f64(rho),
+                                 _f64(floor[ci]), float(self._angle_dynamic),
+                                 self._f_threshold, bool(refine), kb["ca"], kb["cb"],
+                                 kb["az"], kb["el"], kb["row"], kb["row_steer"],
+                                 kb["el_sines"], float(g.rho), step[0], step[1],
+                                 bool(self._focus), *tables, self._near.wavenumber, alive)
+            uy, uz, peak, w, ci = uy[alive], uz[alive], peak[alive], w[:, alive], ci[alive]
+            return self._join_lone(lone, uy, uz, peak, w, ci)
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
@@ -1126,11 +1185,20 @@ class RadarProcessor:
         amps = self._joint_amplitudes(x, w, cell_of, rank)
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
-        if lone is not None:
-            order = np.argsort(np.concatenate((lone[4], ci)), kind="stable")
-            uy, uz, peak, ci = (np.concatenate((a, b))[order] for a, b in zip(
-                (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
-            w = np.concatenate([lone[3], w], axis=1)[:, order]
+        return self._join_lone(lone, uy, uz, peak, w, ci)
+
+    @staticmethod
+    def _join_lone(lone: tuple[np.ndarray, ...] | None, uy: np.ndarray, uz: np.ndarray,
+                   peak: np.ndarray, w: np.ndarray, ci: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The cells with one source (``lone``: their ``uy, uz, peak, w, ci``) back among
+        the others, in cell order."""
+        if lone is None:
+            return uy, uz, peak, w, ci
+        order = np.argsort(np.concatenate((lone[4], ci)), kind="stable")
+        uy, uz, peak, ci = (np.concatenate((a, b))[order] for a, b in zip(
+            (lone[0], lone[1], lone[2], lone[4]), (uy, uz, peak, ci), strict=True))
+        w = np.concatenate([lone[3], w], axis=1)[:, order]
         return uy, uz, peak, w, ci
 
     def _screen_secondaries(self, x: np.ndarray, ci: np.ndarray, uy: np.ndarray,
@@ -1143,7 +1211,8 @@ class RadarProcessor:
         (:func:`~coloradar.dsp._kernels.secondary_bound`; with focusing, plus what the
         focusing phases' change over the elevations can add,
         :func:`~coloradar.dsp._kernels.secondary_bound_focused`); the others get their
-        elevation search now. Returns ``uy, uz, peak, ci, x, rho, primary`` of the peaks kept."""
+        elevation search now. Returns ``uy, uz, peak, ci, x, rho, primary`` of the peaks kept
+        and the primaries' weights ``(M, primaries)`` (as :meth:`_steer`)."""
         kb = self._beam_kernels
         assert kb is not None
         lead = np.cumsum(primary) - 1                   # each peak's primary, among primaries
@@ -1183,7 +1252,7 @@ class RadarProcessor:
         if deferred.any():
             uz[deferred], peak[deferred] = self._elevation_search(x[deferred], uy[deferred],
                                                                   rho[deferred])
-        return uy, uz, peak, ci, x, rho, primary
+        return uy, uz, peak, ci, x, rho, primary, wp
 
     def _residual_floor(self, x: np.ndarray, w: np.ndarray, amps: np.ndarray,
                         cell_of: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -1229,8 +1298,7 @@ class RadarProcessor:
         if kb is not None:
             if self._focus:
                 # focused at elevation 0, as the numpy path's azimuth steering below
-                x = x * self._near.focus_sines(uy, np.zeros(uy.size), rho,
-                                               transpose=True)
+                x = self._focused(x, uy, np.zeros(uy.size), rho)
             out = np.empty((2, uy.size))
             kb["k"].elevation_search(_c64(x), kb["ca"], kb["az"], kb["row"], kb["row_steer"],
                                      kb["el_sines"], _f64(uy), float(g.rho), out[0], out[1])
@@ -1509,6 +1577,11 @@ class RadarProcessor:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
                    if getattr(self.settings, f.name) != f.default}
         return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+# focus_multiply's tables where nothing is focused (joint_refine then leaves them unread)
+_NO_FOCUS = (np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, 2)),
+             np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.complex128))
 
 
 def _groups(ci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
