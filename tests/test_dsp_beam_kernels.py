@@ -332,3 +332,53 @@ def test_compiled_focusing_matches_the_fresnel_phase_of_each_antenna_pair(rows):
     np.testing.assert_allclose(got if rows else got.T, want, rtol=0, atol=5e-5 * np.abs(x).max())
     # the input is left as it was unless asked otherwise
     np.testing.assert_array_equal(x, x0)
+
+
+def test_compiled_peak_grouping_matches_the_numpy_grouping():
+    """The compiled peak grouping gives the numpy grouping's mask on random maps: ties
+    (integer powers), untested cells (+inf noise), with and without the bin after the last,
+    and the small shapes where wrapping and mirroring meet (one or two bins per axis)."""
+    from coloradar.dsp import _kernels
+    from coloradar.dsp.processor import STRONG_NEIGHBOUR, _group_peaks
+
+    rng = np.random.default_rng(8)
+    shapes = [(16, 64), (1, 5), (2, 2), (5, 1), (3, 2), (64, 128)]
+    checked = 0
+    for nd, nr in shapes:
+        for trial in range(6):
+            stat = rng.integers(0, 6, (nd, nr)).astype(np.float64) ** 3   # ties and peaks
+            noise = np.where(rng.random((nd, nr)) < 0.2, np.inf, rng.uniform(0.5, 30, (nd, nr)))
+            mask = rng.random((nd, nr)) < 0.6
+            nxt = rng.integers(0, 6, nd).astype(np.float64) ** 3 if trial % 2 else None
+            want = _group_peaks(stat, mask.copy(), noise, nxt)
+            got = np.empty((nd, nr), dtype=bool)
+            _kernels.group_peaks(stat, mask, noise, np.zeros(0) if nxt is None else nxt,
+                                 STRONG_NEIGHBOUR, got)
+            np.testing.assert_array_equal(got, want)
+            checked += int(want.sum())
+    assert checked > 100                                   # the cases keep cells to compare
+
+
+def test_compiled_channel_noise_picks_the_same_median_cell():
+    """The compiled median of each channel's noise cells is numpy's selection, to the bit:
+    exponential noise of different powers per channel, maps with zeros and repeated values,
+    the subsampled and the full cell sets, and a NaN (which the compiled path hands back to
+    numpy rather than order wrongly)."""
+    from coloradar.dsp.detect import channel_noise
+
+    rng = np.random.default_rng(2)
+    cases = [((192, 16, 128), 3), ((12, 128, 64), 2), ((5, 4, 10), 0), ((3, 2, 5), 7),
+             ((4, 64, 256), 5)]
+    for shape, first in cases:
+        p = (rng.exponential(size=shape) * rng.uniform(0.1, 9, (shape[0], 1, 1))
+             ).astype(np.float32)
+        p[0, :, ::3] = 0.0                                       # zeros and ties
+        p[1] = np.round(p[1])
+        want = channel_noise(p, first)
+        got = channel_noise(p, first, engine="numba")
+        np.testing.assert_array_equal(got, want)
+        # the median of an exponential is ln 2 times its mean: sig2 estimates the mean
+        if shape[1] * shape[2] > 1000:
+            assert np.all(np.abs(got[2:] / (p[2:].mean(axis=(1, 2))) - 1) < 0.25)
+    p[0, 0, 5] = np.nan
+    np.testing.assert_array_equal(channel_noise(p, 5, engine="numba"), channel_noise(p, 5))

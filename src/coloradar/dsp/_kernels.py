@@ -25,7 +25,8 @@ import numba
 import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "focus_multiply",
-           "gather_rows", "joint_amplitudes", "joint_refine", "newton_refine",
+           "gather_rows", "group_peaks", "joint_amplitudes", "joint_refine", "median_bits",
+           "newton_refine",
            "peak_over_doppler", "peak_over_doppler_planar", "power", "prepare_chirps",
            "secondary_bound", "secondary_bound_focused", "secondary_residual", "source_pairs",
            "steer_columns"]
@@ -838,6 +839,91 @@ def joint_amplitudes(x: Any, w: Any, starts: Any, out: Any) -> None:  # pragma: 
 
 
 @_jit(nogil=True)
+def group_peaks(stat: Any, mask: Any, noise: Any, nxt: Any, strong: float,
+                out: Any) -> None:  # pragma: no cover - compiled
+    """The detection mask after peak grouping, ``out`` bool ``(doppler, range)``.
+
+    ``stat`` float64 ``(doppler, range)`` the detection statistic, ``mask`` its CFAR
+    detections, ``noise`` the CFAR noise (+inf where untested), ``nxt`` float64
+    ``(doppler,)`` the statistic of the range bin after the last (empty: not computed).
+    A cell is a *peak* when it passes the CFAR and is a maximum of its 3 × 3 neighbourhood
+    (Doppler wrapped; along range, the bin after the last compared where ``nxt`` is given,
+    else the edge is no bar; the diagonals with range mirrored at the edges); cells that
+    pass the CFAR and peak along one axis only are kept within one cell of a peak at least
+    ``strong`` times its noise. (The numpy expression of
+    :meth:`coloradar.dsp.processor.RadarProcessor._detect` in one pass.)"""
+    nd, nr = stat.shape
+    has_nxt = nxt.size > 0
+    along = np.zeros((nd, nr), np.uint8)         # bit 0: along Doppler, bit 1: along range
+    out[:] = False
+    beside = np.zeros((nd, nr), np.bool_)
+    for i in range(nd):
+        im, ip = (i - 1) % nd, (i + 1) % nd
+        for j in range(nr):
+            v = stat[i, j]
+            ad = v >= stat[im, j] and v >= stat[ip, j]
+            if j < nr - 1:
+                ar = v >= stat[i, j + 1]
+            else:
+                ar = v >= nxt[i] if has_nxt else True
+            if j > 0:
+                ar = ar and v >= stat[i, j - 1]
+            along[i, j] = np.uint8(ad) | (np.uint8(ar) << 1)
+            if not (mask[i, j] and ad and ar):
+                continue
+            if nr > 1:
+                lo = j - 1 if j > 0 else 1
+                hi = j + 1 if j < nr - 1 else nr - 2
+                if not (v >= stat[im, lo] and v >= stat[im, hi] and v >= stat[ip, lo]
+                        and v >= stat[ip, hi]):
+                    continue
+            out[i, j] = True
+            if v >= strong * noise[i, j]:
+                for o in (im, i, ip):
+                    for q in range(max(j - 1, 0), min(j + 2, nr)):
+                        beside[o, q] = True
+    for i in range(nd):
+        for j in range(nr):
+            if not out[i, j] and mask[i, j] and along[i, j] != 0 and beside[i, j]:
+                out[i, j] = True
+
+
+@_jit(nogil=True)
+def median_bits(power: Any, cells: Any, k: int, out: Any) -> bool:  # pragma: no cover
+    """The ``k``-th smallest (0-based) of ``power[c, cells]`` for every row ``c``, as the
+    int32 bit pattern of the float32 value (``out`` int32 ``(C,)``); ``power`` float32
+    ``(C, N)``, ``cells`` int ``(K,)``. Non-negative float32 values order as their bit
+    patterns: a 1024-bucket histogram of the top bits finds the bucket holding the ``k``-th
+    value, and only that bucket's few values are sorted (two passes over the cells instead
+    of numpy's gather and introselect). Returns False, leaving ``out`` unfinished, where a
+    value is negative or NaN (whose bits do not order as the values)."""
+    bits = power.view(np.int32)
+    n = cells.size
+    hist = np.zeros(1024, np.int64)
+    buf = np.empty(n, np.int32)
+    for r in range(power.shape[0]):
+        hist[:] = 0
+        for i in range(n):
+            v = bits[r, cells[i]]
+            if v < 0 or v > 0x7F800000:
+                return False
+            hist[v >> 21] += 1
+        below = 0
+        b = 0
+        while below + hist[b] <= k:
+            below += hist[b]
+            b += 1
+        m = 0
+        for i in range(n):
+            v = bits[r, cells[i]]
+            if (v >> 21) == b:
+                buf[m] = v
+                m += 1
+        out[r] = np.sort(buf[:m])[k - below]
+    return True
+
+
+@_jit(nogil=True)
 def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any, floor: Any,
                  dyn: float, f_threshold: Any, refine: bool, ca: float, cb: float,
                  az_pos: Any, el_pos: Any, row: Any, row_steer: Any, el_sines: Any,
@@ -1296,6 +1382,8 @@ focus_multiply = _Announced(focus_multiply)
 elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)
 joint_refine = _Announced(joint_refine)
+group_peaks = _Announced(group_peaks)
+median_bits = _Announced(median_bits)
 newton_refine = _Announced(newton_refine)
 secondary_bound = _Announced(secondary_bound)
 secondary_bound_focused = _Announced(secondary_bound_focused)

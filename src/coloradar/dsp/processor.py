@@ -790,7 +790,8 @@ class RadarProcessor:
         # Inverse-noise weights: each term a unit exponential times the mean noise power, so
         # the sum is a Ntx·Nrx-look chi-square whatever the channel gains.
         sig2 = channel_noise(mag2.reshape(ntx * nrx, nd, nr),
-                             int(np.ceil(s.min_range / self.range_bin_width)))
+                             int(np.ceil(s.min_range / self.range_bin_width)),
+                             engine=self._engine)
         wts = (sig2.mean() / sig2).astype(np.float32)
         stat = (wts @ mag2).reshape(nd, nr).astype(np.float64)
         if self._uncoupled is not None:
@@ -852,40 +853,15 @@ class RadarProcessor:
             # Cells that peak along Doppler or along range: a target one bin from a stronger
             # one (in the other axis) is no 2D maximum of the summed power, but it is one of
             # its own beam; the beam test below decides (docs/dsp.md, "Grouping").
-            # (neighbours compared in place, no rolled copies of the map)
-            along_d = np.empty(stat.shape, dtype=bool)
-            along_d[1:] = stat[1:] >= stat[:-1]
-            along_d[0] = stat[0] >= stat[-1]
-            along_d[:-1] &= stat[:-1] >= stat[1:]
-            along_d[-1] &= stat[-1] >= stat[0]
-            along_r = np.ones(stat.shape, dtype=bool)
-            along_r[:, :-1] = stat[:, :-1] >= stat[:, 1:]
-            if nxt is not None:
-                along_r[:, -1] = stat[:, -1] >= nxt
-            along_r[:, 1:] &= stat[:, 1:] >= stat[:, :-1]
-            peaks = mask & along_d & along_r
-            # The 3×3 maximum (Doppler wrapped, range mirrored) on the few cells left: the
-            # cross is the two tests above, the diagonals remain (a mirrored range edge
-            # repeats the inner column: the same diagonals).
-            cd, cr = np.nonzero(peaks)
-            if cd.size and nr > 1:
-                lo = np.where(cr > 0, cr - 1, 1)
-                hi = np.where(cr < nr - 1, cr + 1, nr - 2)
-                dm, dp = (cd - 1) % nd, (cd + 1) % nd
-                v = stat[cd, cr]
-                diag = ((v >= stat[dm, lo]) & (v >= stat[dm, hi]) & (v >= stat[dp, lo])
-                        & (v >= stat[dp, hi]))
-                peaks[cd[~diag], cr[~diag]] = False
-            # Cells that peak along one axis only are examined beside a strong 2D peak (a
-            # target one bin from a stronger one); elsewhere they would add noise crossings.
-            strong = peaks & (stat >= STRONG_NEIGHBOUR * noise)
-            # (the 3×3 dilation of the few strong cells, Doppler wrapped, range clipped)
-            sd, sr = np.nonzero(strong)
-            beside = np.zeros(stat.shape, dtype=bool)
-            for o in (-1, 0, 1):
-                beside[((sd + o) % nd)[:, None],
-                       np.clip(sr[:, None] + np.array([-1, 0, 1]), 0, nr - 1)] = True
-            mask = peaks | (mask & (along_d | along_r) & beside)
+            if self._beam_kernels is not None:
+                grouped = np.empty(stat.shape, dtype=bool)
+                self._beam_kernels["k"].group_peaks(
+                    np.ascontiguousarray(stat), np.ascontiguousarray(mask),
+                    np.ascontiguousarray(noise), _f64(nxt if nxt is not None else np.zeros(0)),
+                    float(STRONG_NEIGHBOUR), grouped)
+                mask = grouped
+            else:
+                mask = _group_peaks(stat, mask, noise, nxt)
         d, r = np.nonzero(mask)
         near = r < int(np.ceil(s.min_range / self.range_bin_width))
         # Cells inside min_range still explain sidelobes (guard below); they make no points.
@@ -1577,6 +1553,51 @@ class RadarProcessor:
         changed = {f.name: getattr(self.settings, f.name) for f in fields(self.settings)
                    if getattr(self.settings, f.name) != f.default}
         return f"RadarProcessor({self.calib.name!r}, {changed})"
+
+
+def _group_peaks(stat: np.ndarray, mask: np.ndarray, noise: np.ndarray,
+                 nxt: np.ndarray | None) -> np.ndarray:
+    """The detection mask after peak grouping (numpy; :func:`~._kernels.group_peaks` is the
+    compiled one): CFAR cells ``mask`` that are maxima of their 3 × 3 neighbourhood of
+    ``stat`` ``(doppler, range)`` (Doppler wrapped; the bin after the last range bin,
+    ``nxt`` ``(doppler,)``, compared where given; diagonals with range mirrored), and CFAR
+    cells that peak along one axis within one cell of a peak ``STRONG_NEIGHBOUR`` times
+    its ``noise``."""
+    nd, nr = stat.shape
+    # (neighbours compared in place, no rolled copies of the map)
+    along_d = np.empty(stat.shape, dtype=bool)
+    along_d[1:] = stat[1:] >= stat[:-1]
+    along_d[0] = stat[0] >= stat[-1]
+    along_d[:-1] &= stat[:-1] >= stat[1:]
+    along_d[-1] &= stat[-1] >= stat[0]
+    along_r = np.ones(stat.shape, dtype=bool)
+    along_r[:, :-1] = stat[:, :-1] >= stat[:, 1:]
+    if nxt is not None:
+        along_r[:, -1] = stat[:, -1] >= nxt
+    along_r[:, 1:] &= stat[:, 1:] >= stat[:, :-1]
+    peaks = mask & along_d & along_r
+    # The 3×3 maximum (Doppler wrapped, range mirrored) on the few cells left: the
+    # cross is the two tests above, the diagonals remain (a mirrored range edge
+    # repeats the inner column: the same diagonals).
+    cd, cr = np.nonzero(peaks)
+    if cd.size and nr > 1:
+        lo = np.where(cr > 0, cr - 1, 1)
+        hi = np.where(cr < nr - 1, cr + 1, nr - 2)
+        dm, dp = (cd - 1) % nd, (cd + 1) % nd
+        v = stat[cd, cr]
+        diag = ((v >= stat[dm, lo]) & (v >= stat[dm, hi]) & (v >= stat[dp, lo])
+                & (v >= stat[dp, hi]))
+        peaks[cd[~diag], cr[~diag]] = False
+    # Cells that peak along one axis only are examined beside a strong 2D peak (a
+    # target one bin from a stronger one); elsewhere they would add noise crossings.
+    strong = peaks & (stat >= STRONG_NEIGHBOUR * noise)
+    # (the 3×3 dilation of the few strong cells, Doppler wrapped, range clipped)
+    sd, sr = np.nonzero(strong)
+    beside = np.zeros(stat.shape, dtype=bool)
+    for o in (-1, 0, 1):
+        beside[((sd + o) % nd)[:, None],
+               np.clip(sr[:, None] + np.array([-1, 0, 1]), 0, nr - 1)] = True
+    return peaks | (mask & (along_d | along_r) & beside)
 
 
 # focus_multiply's tables where nothing is focused (joint_refine then leaves them unread)
