@@ -24,12 +24,11 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["CACHE_PROBLEM", "LANES", "beam_neighbourhood", "elevation_search", "focus_multiply",
-           "gather_rows", "group_peaks", "joint_amplitudes", "joint_refine", "median_bits",
-           "newton_refine",
-           "peak_over_doppler", "peak_over_doppler_planar", "power", "prepare_chirps",
-           "secondary_bound", "secondary_bound_focused", "secondary_residual", "source_pairs",
-           "steer_columns"]
+__all__ = ["CACHE_PROBLEM", "LANES", "azimuth_peaks", "beam_neighbourhood", "elevation_search",
+           "focus_multiply", "gather_rows", "group_peaks", "joint_amplitudes", "joint_refine",
+           "median_bits", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
+           "power", "prepare_chirps", "secondary_bound", "secondary_bound_focused",
+           "secondary_residual", "source_pairs", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -615,9 +614,10 @@ def newton_refine(x: Any, ca: float, cb: float, az_pos: Any, el_pos: Any, uy: An
         xk = x[k]
         _powers(ca, y, pa)
         _powers(cb, z, pe)
-        b0 = _beam(xk, az_pos, el_pos, pa, pe)
-        p0 = b0.real * b0.real + b0.imag * b0.imag
-        for _ in range(iterations):
+        # (the start's beam power comes from the first moment pass, which sums the same
+        # terms in the same order as _beam: one pass over the elements less)
+        p0 = -1.0
+        for it in range(max(iterations, 1)):
             bv = sa = sb = saa = sbb = sab = 0.0 + 0.0j
             for m in range(m_n):
                 v = xk[m] * (pa[az_pos[m]] * pe[el_pos[m]])
@@ -629,6 +629,10 @@ def newton_refine(x: Any, ca: float, cb: float, az_pos: Any, el_pos: Any, uy: An
                 saa += v * (a * a)
                 sbb += v * (b * b)
                 sab += v * (a * b)
+            if it == 0:
+                p0 = bv.real * bv.real + bv.imag * bv.imag
+                if iterations < 1:
+                    break
             by, bz = 1j * sa, 1j * sb                 # dB/du_y, dB/du_z
             cbv = bv.conjugate()
             gy = 2.0 * (cbv * by).real
@@ -737,6 +741,40 @@ def elevation_search(x: Any, ca: float, az_pos: Any, row: Any, row_steer: Any, e
         fe = ie + _log_parabola(bz[(ie - 1) % ne], bz[ie], bz[(ie + 1) % ne])
         out_uz[p] = 2.0 * (fe - ne // 2) / (ne * rho)
         out_power[p] = bz[ie] / (m_n * m_n)
+
+
+@_jit(nogil=True)
+def azimuth_peaks(profile: Any, relative: float, floor: Any, out_k: Any,
+                  out_a: Any) -> int:  # pragma: no cover - compiled
+    """:func:`coloradar.dsp.angle.azimuth_peaks` of float32 profiles ``(K, A)`` (the same
+    peaks in the same order): writes the profile and bin of each peak to ``out_k``,
+    ``out_a`` (int64, at least ``K·A`` long) and returns how many. ``floor`` float64
+    ``(K,)``; ``relative`` is applied in float32, as numpy does with a Python float."""
+    k_n, a_n = profile.shape
+    rel = np.float32(relative)
+    n = 0
+    for k in range(k_n):
+        row = profile[k]
+        top = row[0]
+        arg = 0
+        for a in range(1, a_n):
+            if row[a] > top:
+                top, arg = row[a], a
+        lim = rel * top
+        start = n
+        for a in range(a_n):
+            v = row[a]
+            if a == arg or (v > row[(a - 1) % a_n] and v >= row[(a + 1) % a_n]
+                            and v >= lim and v >= floor[k]):
+                # strongest first, ties in bin order (a stable insertion)
+                j = n
+                while j > start and row[out_a[j - 1]] < v:
+                    out_a[j] = out_a[j - 1]
+                    j -= 1
+                out_a[j] = a
+                out_k[n] = k
+                n += 1
+    return n
 
 
 @_jit(nogil=True)
@@ -1384,6 +1422,7 @@ joint_amplitudes = _Announced(joint_amplitudes)
 joint_refine = _Announced(joint_refine)
 group_peaks = _Announced(group_peaks)
 median_bits = _Announced(median_bits)
+azimuth_peaks = _Announced(azimuth_peaks)
 newton_refine = _Announced(newton_refine)
 secondary_bound = _Announced(secondary_bound)
 secondary_bound_focused = _Announced(secondary_bound_focused)

@@ -165,16 +165,20 @@ def steering(grid: AngleGrid, uy: np.ndarray, uz: np.ndarray) -> np.ndarray:
     return out
 
 
-def row_profile(grid: AngleGrid, vectors: np.ndarray, workers: int = 1) -> np.ndarray:
+def row_profile(grid: AngleGrid, vectors: np.ndarray, workers: int = 1,
+                row: np.ndarray | None = None) -> np.ndarray:
     """Azimuth beam power of the most populated elevation row alone, float32 ``(K, num_az)``.
 
     A row is a line array along azimuth: its spectrum measures ``u_y`` whatever the
     elevation, and two sources make no ghosts in elevation (the sparse elevation rows do:
     the 2D spectrum of two sources can peak between them at a wrong elevation). Used to find
-    how many sources a cell holds and their azimuths; the full array refines them.
+    how many sources a cell holds and their azimuths; the full array refines them. ``row``:
+    that row's elements (bool ``(M,)``) where the caller has it already.
     """
-    rows, counts = np.unique(grid.el_pos, return_counts=True)
-    sel = grid.el_pos == rows[np.argmax(counts)]
+    if row is None:
+        rows, counts = np.unique(grid.el_pos, return_counts=True)
+        row = grid.el_pos == rows[np.argmax(counts)]
+    sel = row
     x = np.asarray(vectors)[:, sel]
     buf = np.zeros((x.shape[0], grid.n_az), dtype=np.complex64)
     buf[:, grid.az_pos[sel]] = x

@@ -901,10 +901,11 @@ class RadarProcessor:
         if s.angle_method == "fft":
             # Sources and their azimuths from the filled row (the noise floor of a row beam
             # is M/M_row times that of the full beam), each elevation from the rows' sums.
-            prof = row_profile(self.detection_grid, vectors, workers=s.workers)
+            prof = row_profile(self.detection_grid, vectors, workers=s.workers,
+                               row=self._row_sel)
             prof = np.where(self._visible_az[None], prof, 0.0)
-            ci, ia = azimuth_peaks(prof, rel, floor * self._row_noise if s.multi_peak
-                                   else np.full(d.size, np.inf))
+            ci, ia = self._azimuth_peaks(prof, rel, floor * self._row_noise if s.multi_peak
+                                         else np.full(d.size, np.inf))
             na = self.detection_grid.num_az
             fa = refine_peak(np.stack([prof[ci, (ia - 1) % na], prof[ci, ia],
                                        prof[ci, (ia + 1) % na]], axis=1), ia, na, wrap=True)
@@ -991,6 +992,16 @@ class RadarProcessor:
         if self._focus:
             w = w * self._near.focus_sines(uy, uz, rho)
         return w
+
+    def _azimuth_peaks(self, prof: np.ndarray, rel: float, floor: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`~coloradar.dsp.angle.azimuth_peaks`, compiled with the numba engine."""
+        kb = self._beam_kernels
+        if kb is None or prof.dtype != np.float32:
+            return azimuth_peaks(prof, rel, floor)
+        ci, ia = np.empty((2, prof.size), dtype=np.int64)
+        n = kb["k"].azimuth_peaks(np.ascontiguousarray(prof), float(rel), _f64(floor), ci, ia)
+        return ci[:n], ia[:n]
 
     def _focused(self, x: np.ndarray, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray,
                  rows: bool = True, copy: bool = True) -> np.ndarray:
