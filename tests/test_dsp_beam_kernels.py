@@ -38,6 +38,18 @@ def _steering(proc: RadarProcessor, uy: np.ndarray, uz: np.ndarray) -> np.ndarra
     return np.exp(1j * ph)
 
 
+def _cascade_calib():
+    """The release's cascade calibration where the reference files are here, else the preset."""
+    from _synth import REFERENCE_CALIB
+    from coloradar.calib import load_calibration
+
+    if not REFERENCE_CALIB.is_dir():
+        return preset_radar("cascade")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")                 # the real files' known defects
+        return load_calibration(REFERENCE_CALIB).radar("cascade")
+
+
 def _random_directions(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
     uy = rng.uniform(-0.8, 0.8, n)
     uz = rng.uniform(-0.5, 0.5, n)
@@ -192,15 +204,7 @@ def test_point_clouds_of_both_engines_agree_with_focusing(name):
 def _focused_bound_case(seed: int, near: bool):
     """The focused secondary bound's inputs on the cascade (relative focusing on the
     calibration's reflector where there is one), random vectors, directions and ranges."""
-    from _synth import REFERENCE_CALIB
-    from coloradar.calib import load_calibration
-
-    if REFERENCE_CALIB.is_dir():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")             # the real files' known defects
-            calib = load_calibration(REFERENCE_CALIB).radar("cascade")
-    else:
-        calib = preset_radar("cascade")
+    calib = _cascade_calib()
     proc = RadarProcessor(calib, engine="numba", near_field=True)
     assert proc._focus and proc._near_terms is not None
     rng = np.random.default_rng(seed)
@@ -299,15 +303,7 @@ def test_compiled_focusing_matches_the_fresnel_phase_of_each_antenna_pair(rows):
     element by ``exp(−jk/(2ρ)·(|t|² − (t·u)² + |r|² − (r·u)²) + jk·(|t|² + |r|²)/(2R0))``,
     written here from the antenna pairs (complex128), for directions inside and beyond the
     visible disc (scaled onto its edge) and both layouts of the vectors."""
-    from _synth import REFERENCE_CALIB
-    from coloradar.calib import load_calibration
-
-    if REFERENCE_CALIB.is_dir():
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")             # the real files' known defects
-            calib = load_calibration(REFERENCE_CALIB).radar("cascade")
-    else:
-        calib = preset_radar("cascade")
+    calib = _cascade_calib()
     proc = RadarProcessor(calib, engine="numba", near_field=True)
     assert proc._focus_tables is not None
     rng = np.random.default_rng(4)

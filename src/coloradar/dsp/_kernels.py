@@ -961,6 +961,27 @@ def median_bits(power: Any, cells: Any, k: int, out: Any) -> bool:  # pragma: no
     return True
 
 
+@numba.njit(inline="always")
+def _alive_of_cell(alive: Any, s0: int, s1: int, cols: Any) -> int:  # pragma: no cover
+    # the peaks s0 … s1 − 1 still alive, into cols; how many
+    n = 0
+    for p in range(s0, s1):
+        if alive[p]:
+            cols[n] = p
+            n += 1
+    return n
+
+
+@numba.njit(inline="always")
+def _fit_total(w: Any, amps: Any, cols: Any, n: int, total: Any) -> None:  # pragma: no cover
+    # Σ_i conj(w[:, cols[i]])·amps[cols[i]]: the fitted sources of a cell, summed
+    total[:] = 0.0
+    for i in range(n):
+        q = cols[i]
+        for m in range(total.size):
+            total[m] += complex(w[m, q]).conjugate() * amps[q]
+
+
 @_jit(nogil=True)
 def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any, floor: Any,
                  dyn: float, f_threshold: Any, refine: bool, ca: float, cb: float,
@@ -1001,11 +1022,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
     total = np.empty(m_n, np.complex128)
     for rnd in range(3):
         for c in range(n_cells):
-            n = 0
-            for p in range(starts[c], starts[c + 1]):
-                if alive[p]:
-                    cols[n] = p
-                    n += 1
+            n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
             _cell_amplitudes(x, starts[c], w, cols, n, amps)
             top = 0.0
             for i in range(n):
@@ -1013,11 +1030,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
                 top = max(top, v * v)
             rf = 0.0
             if rnd > 0:
-                total[:] = 0.0
-                for i in range(n):
-                    q = cols[i]
-                    for m in range(m_n):
-                        total[m] += complex(w[m, q]).conjugate() * amps[q]
+                _fit_total(w, amps, cols, n, total)
                 rss = 0.0
                 for m in range(m_n):
                     v = abs(complex(x[starts[c], m]) - total[m])
@@ -1052,17 +1065,9 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         for c in range(n_cells):
             if count[c] < 2:
                 continue
-            n = 0
-            for p in range(starts[c], starts[c + 1]):
-                if alive[p]:
-                    cols[n] = p
-                    n += 1
+            n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
             _cell_amplitudes(x, starts[c], w, cols, n, amps)
-            total[:] = 0.0
-            for i in range(n):
-                q = cols[i]
-                for m in range(m_n):
-                    total[m] += complex(w[m, q]).conjugate() * amps[q]
+            _fit_total(w, amps, cols, n, total)
             for i in range(n):
                 q = cols[i]
                 for m in range(m_n):
@@ -1100,11 +1105,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
     for c in range(n_cells):
         if count[c] < 2:
             continue
-        n = 0
-        for p in range(starts[c], starts[c + 1]):
-            if alive[p]:
-                cols[n] = p
-                n += 1
+        n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
         _cell_amplitudes(x, starts[c], w, cols, n, amps)
         for i in range(n):
             v = abs(amps[cols[i]])
