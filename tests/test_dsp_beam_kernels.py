@@ -360,6 +360,7 @@ def test_compiled_channel_noise_picks_the_same_median_cell():
     exponential noise of different powers per channel, maps with zeros and repeated values,
     the subsampled and the full cell sets, and a NaN (which the compiled path hands back to
     numpy rather than order wrongly)."""
+    from coloradar.dsp import _kernels
     from coloradar.dsp.detect import channel_noise
 
     rng = np.random.default_rng(2)
@@ -373,6 +374,9 @@ def test_compiled_channel_noise_picks_the_same_median_cell():
         want = channel_noise(p, first)
         got = channel_noise(p, first, engine="numba")
         np.testing.assert_array_equal(got, want)
+        # (and the compiled selection made it: not numpy's, taken over on a refusal)
+        out = np.empty(shape[0], dtype=np.int32)
+        assert _kernels.median_bits(p.reshape(shape[0], -1), np.arange(p[0].size), 0, out)
         # the median of an exponential is ln 2 times its mean: sig2 estimates the mean
         if shape[1] * shape[2] > 1000:
             assert np.all(np.abs(got[2:] / (p[2:].mean(axis=(1, 2))) - 1) < 0.25)
@@ -401,3 +405,72 @@ def test_compiled_azimuth_peaks_match_numpy():
             np.testing.assert_array_equal(ca_[:n], wa)
             total += n
     assert total > 200
+    # a NaN bin (NaN in the frame): numpy's argmax stops at it, and so does the kernel
+    prof = rng.exponential(size=(6, 32)).astype(np.float32)
+    prof[1, 7] = prof[3, 0] = prof[4, 31] = np.nan
+    floor = np.zeros(6)
+    wk, wa = azimuth_peaks(prof, 0.1, floor)
+    ck, ca_ = np.empty((2, prof.size), dtype=np.int64)
+    n = _kernels.azimuth_peaks(prof, 0.1, floor, ck, ca_)
+    np.testing.assert_array_equal(ck[:n], wk)
+    np.testing.assert_array_equal(ca_[:n], wa)
+
+
+@pytest.mark.parametrize("name,focus", [("cascade", False), ("cascade", True),
+                                        ("single_chip", False)])
+def test_compiled_joint_refinement_is_the_numpy_loop(name, focus, monkeypatch):
+    """Cells with several sources (pairs sharing range and range rate): the compiled joint
+    refinement keeps the same sources at the same directions as the numpy loop it replaces
+    (the same kernels inside: bit-equal), with powers equal to 1 ulp (numba's |z| is hypot,
+    numpy's its own)."""
+    from _synth import exact_adc
+
+    calib = _cascade_calib() if name == "cascade" else preset_radar(name)
+    proc = RadarProcessor(calib, engine="numba", near_field=focus)
+    rng = np.random.default_rng(12)
+    multi = 0
+    for f in range(3):
+        k = 6
+        rng_m = rng.uniform(2.0, 7.0, k)
+        az, el = rng.uniform(-1.0, 1.0, k), rng.uniform(-0.2, 0.2, k)
+        pos = rng_m[:, None] * np.column_stack([np.cos(el) * np.cos(az),
+                                                np.cos(el) * np.sin(az), np.sin(el)])
+        pos[1::2] = pos[0::2] * [1, -1, 1]                         # pairs in one cell
+        vel = rng.uniform(-0.5, 0.5, (k, 1)) * pos / rng_m[:, None]
+        vel[1::2] = vel[0::2] * [1, -1, 1]
+        synth = exact_adc if focus else synthesize_adc
+        adc = synth(calib, pos, vel, 200.0 * rng_m**2, noise_std=10.0, rng=f)
+        got = proc.detect(adc)
+        monkeypatch.setattr(RadarProcessor, "_COMPILED_JOINT", False)
+        want = proc.detect(adc)
+        monkeypatch.setattr(RadarProcessor, "_COMPILED_JOINT", True)
+        cells = np.stack([want.range_bin, want.doppler_bin], axis=1)
+        multi += len(cells) - len(np.unique(cells, axis=0))
+        for field in ("range_bin", "doppler_bin", "azimuth", "elevation", "range", "xyz"):
+            np.testing.assert_array_equal(getattr(got, field), getattr(want, field))
+        np.testing.assert_allclose(got.intensity, want.intensity, rtol=1e-14, atol=0)
+    assert multi >= 2                                  # cells with two points were compared
+
+
+def test_joint_amplitudes_of_two_sources_in_one_direction():
+    """Two peaks of a cell with the same weights (a singular Gram matrix): both engines give
+    finite amplitudes whose fit is the cell's least-squares projection, where they used to
+    raise (ZeroDivisionError compiled, LinAlgError in numpy)."""
+    from coloradar.dsp import _kernels
+
+    proc_n = RadarProcessor(preset_radar("cascade"), engine="numba")
+    proc_p = RadarProcessor(preset_radar("cascade"), engine="numpy")
+    rng = np.random.default_rng(3)
+    uy, uz = np.array([0.2, 0.2, -0.4]), np.array([0.1, 0.1, 0.0])   # peaks 0 and 1 alike
+    w = proc_n._steer(uy, uz, np.full(3, 5.0))
+    m = w.shape[0]
+    xc = (rng.normal(size=m) + 1j * rng.normal(size=m)).astype(np.complex64)
+    x = np.repeat(xc[None], 3, axis=0)
+    a = np.conj(w).astype(np.complex128)                              # (M, 3) sources
+    proj = a[:, [0, 2]] @ np.linalg.lstsq(a[:, [0, 2]], xc.astype(np.complex128), rcond=None)[0]
+    amps = np.empty(3, dtype=np.complex128)
+    _kernels.joint_amplitudes(x, w, np.array([0, 3]), amps)
+    for got in (amps, proc_p._joint_amplitudes(x, w, np.zeros(3, dtype=np.int64),
+                                                np.arange(3))):
+        assert np.all(np.isfinite(got))
+        np.testing.assert_allclose(a @ got, proj, rtol=0, atol=1e-4 * np.abs(proj).max())

@@ -758,7 +758,9 @@ def azimuth_peaks(profile: Any, relative: float, floor: Any, out_k: Any,
         top = row[0]
         arg = 0
         for a in range(1, a_n):
-            if row[a] > top:
+            if top != top:                               # argmax stops at a NaN, as numpy's
+                break
+            if row[a] > top or row[a] != row[a]:
                 top, arg = row[a], a
         lim = rel * top
         start = n
@@ -852,11 +854,18 @@ def _cell_amplitudes(x: Any, row: int, w: Any, cols: Any, n: int,
         if piv != col:
             for j in range(n + 1):
                 g[col, j], g[piv, j] = g[piv, j], g[col, j]
+        if g[col, col] == 0.0:
+            continue                                      # a source the others explain
         for i in range(col + 1, n):
             f = g[i, col] / g[col, col]
             for j in range(col, n + 1):
                 g[i, j] -= f * g[col, j]
     for i in range(n - 1, -1, -1):
+        if g[i, i] == 0.0:
+            # two sources with the same weights (the same direction): the fit is the
+            # others' alone, and this one gets nothing (then fails the keep tests)
+            out[cols[i]] = 0.0
+            continue
         v = g[i, n]
         for j in range(i + 1, n):
             v -= g[i, j] * out[cols[j]]
@@ -888,8 +897,7 @@ def group_peaks(stat: Any, mask: Any, noise: Any, nxt: Any, strong: float,
     (Doppler wrapped; along range, the bin after the last compared where ``nxt`` is given,
     else the edge is no bar; the diagonals with range mirrored at the edges); cells that
     pass the CFAR and peak along one axis only are kept within one cell of a peak at least
-    ``strong`` times its noise. (The numpy expression of
-    :meth:`coloradar.dsp.processor.RadarProcessor._detect` in one pass.)"""
+    ``strong`` times its noise. (:func:`coloradar.dsp.processor._group_peaks` in one pass.)"""
     nd, nr = stat.shape
     has_nxt = nxt.size > 0
     along = np.zeros((nd, nr), np.uint8)         # bit 0: along Doppler, bit 1: along range
@@ -987,7 +995,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
                  dyn: float, f_threshold: Any, refine: bool, ca: float, cb: float,
                  az_pos: Any, el_pos: Any, row: Any, row_steer: Any, el_sines: Any,
                  grid_rho: float, step_y: float, step_z: float, focus: bool, t_yz: Any,
-                 t_sq: Any, it: Any, r_yz: Any, r_sq: Any, ir: Any, ref: Any,
+                 t_sq: Any, tx_idx: Any, r_yz: Any, r_sq: Any, rx_idx: Any, ref: Any,
                  wavenumber: float, alive: Any) -> None:  # pragma: no cover - compiled
     """The joint refinement of cells with several sources
     (:meth:`coloradar.dsp.processor.RadarProcessor._resolve_peaks`'s loop, in one call).
@@ -1024,10 +1032,17 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         for c in range(n_cells):
             n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
             _cell_amplitudes(x, starts[c], w, cols, n, amps)
+            # (|·| then squared as numpy's abs(·)**2 does; numba's |·| is hypot, numpy's its
+            # own: the powers agree to 1 ulp. A NaN power makes the cell's top NaN, as
+            # numpy's maximum.reduceat does, and then only the strongest source stays.)
             top = 0.0
             for i in range(n):
-                v = abs(amps[cols[i]])           # (|·| then squared, as numpy's abs(·)**2)
-                top = max(top, v * v)
+                v = abs(amps[cols[i]])
+                p2 = v * v
+                if p2 > top or p2 != p2:
+                    top = p2
+                if top != top:
+                    break
             rf = 0.0
             if rnd > 0:
                 _fit_total(w, amps, cols, n, total)
@@ -1078,7 +1093,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         ky, kz, kr = uy[idx], np.zeros(k_n), rho[idx]
         xe = xp.copy()
         if focus:
-            _focus_multiply_jit(xe, ky, kz, kr, t_yz, t_sq, it, r_yz, r_sq, ir, ref,
+            _focus_multiply_jit(xe, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
                                 wavenumber, True)
         out_z, out_p = np.empty(k_n), np.empty(k_n)
         _elevation_search_jit(xe, ca, az_pos, row, row_steer, el_sines, ky, grid_rho, out_z,
@@ -1086,7 +1101,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         kz = out_z
         if refine:
             if focus:
-                _focus_multiply_jit(xp, ky, kz, kr, t_yz, t_sq, it, r_yz, r_sq, ir, ref,
+                _focus_multiply_jit(xp, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
                                     wavenumber, True)
             ny, nz, npw = np.empty(k_n), np.empty(k_n), np.empty(k_n)
             _newton_refine_jit(xp, ca, cb, az_pos, el_pos, ky, kz, step_y, step_z, 2, True,
@@ -1095,7 +1110,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         wk = np.empty((m_n, k_n), np.complex64)
         _steer_columns_jit(ca, cb, az_pos, el_pos, ky, kz, wk)
         if focus:
-            _focus_multiply_jit(wk, ky, kz, kr, t_yz, t_sq, it, r_yz, r_sq, ir, ref,
+            _focus_multiply_jit(wk, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
                                 wavenumber, False)
         for k in range(k_n):
             q = idx[k]
@@ -1352,8 +1367,8 @@ def source_pairs(b: Any, i1: Any, total: Any, rss1: Any, cross: Any, gain: Any, 
 
 
 @_jit(nogil=True)
-def focus_multiply(x: Any, uy: Any, uz: Any, rho: Any, t_yz: Any, t_sq: Any, it: Any,
-                   r_yz: Any, r_sq: Any, ir: Any, ref: Any, wavenumber: float,
+def focus_multiply(x: Any, uy: Any, uz: Any, rho: Any, t_yz: Any, t_sq: Any, tx_idx: Any,
+                   r_yz: Any, r_sq: Any, rx_idx: Any, ref: Any, wavenumber: float,
                    by_row: bool) -> None:  # pragma: no cover - compiled
     """``x[·, m] *= exp(jθ_m)`` in place: the near-field focusing phase of an array in the
     y–z plane (:meth:`coloradar.dsp.angle.NearField.focus_sines`), at sines
@@ -1363,11 +1378,11 @@ def focus_multiply(x: Any, uy: Any, uz: Any, rho: Any, t_yz: Any, t_sq: Any, it:
     ``θ_m = −k/(2ρ)·(|t|² − (t·u)² + |r|² − (r·u)²) + ref_m`` is a TX term plus an RX term
     plus a constant, so ``exp(jθ_m)`` is a product of one phasor per TX position
     (``t_yz`` float64 ``(T, 2)``, ``t_sq`` ``(T,)`` = ``|t|²``, element ``m``'s at
-    ``it[m]``), one per RX position (``r_yz``, ``r_sq``, ``ir``) and ``ref`` complex128
+    ``tx_idx[m]``), one per RX position (``r_yz``, ``r_sq``, ``rx_idx``) and ``ref`` complex128
     ``(M,)`` (``exp(j·ref_m)``): a sine and cosine per antenna position (28 on the cascade)
     instead of per element (134), in one pass with no temporaries. (float64 phases; numpy's
     are float32: they agree to float32 rounding.)"""
-    m_n = it.size
+    m_n = tx_idx.size
     et = np.empty(t_sq.size, np.complex128)
     er = np.empty(r_sq.size, np.complex128)
     for p in range(uy.size):
@@ -1389,10 +1404,10 @@ def focus_multiply(x: Any, uy: Any, uz: Any, rho: Any, t_yz: Any, t_sq: Any, it:
             er[i] = complex(math.cos(th), math.sin(th))
         if by_row:
             for m in range(m_n):
-                x[p, m] *= et[it[m]] * er[ir[m]] * ref[m]
+                x[p, m] *= et[tx_idx[m]] * er[rx_idx[m]] * ref[m]
         else:
             for m in range(m_n):
-                x[m, p] *= et[it[m]] * er[ir[m]] * ref[m]
+                x[m, p] *= et[tx_idx[m]] * er[rx_idx[m]] * ref[m]
 
 
 @_jit(nogil=True, fastmath=_FM)

@@ -178,7 +178,7 @@ def row_profile(grid: AngleGrid, vectors: np.ndarray, workers: int = 1,
     if row is None:
         rows, counts = np.unique(grid.el_pos, return_counts=True)
         row = grid.el_pos == rows[np.argmax(counts)]
-    sel = row
+    sel = np.asarray(row, dtype=bool)
     x = np.asarray(vectors)[:, sel]
     buf = np.zeros((x.shape[0], grid.n_az), dtype=np.complex64)
     buf[:, grid.az_pos[sel]] = x

@@ -122,31 +122,26 @@ def channel_noise(power: np.ndarray, first_range: int = 0,
         first_range = 0
     n = nd * (nr - first_range)
     step = -(-n // max(int(max_cells), 1))
-    mid = -(-n // (step | 1)) // 2 if step > 1 else n // 2       # the cells' middle
-    if engine == "numba" and power.dtype == np.float32:
+    # Every k-th cell of the flattened (Doppler, range) grid spreads over both axes; k odd
+    # so that an even range length does not keep the same parity of range bins throughout.
+    cells = _noise_cells(nd, nr, first_range, step | 1 if step > 1 else 1)
+    mid = cells.size // 2
+    flat = power.reshape(c, nd * nr)
+    if engine == "numba" and power.dtype == np.float32 and cells.size:
         from ._kernels import median_bits
         med_bits = np.empty(c, dtype=np.int32)
-        flat = np.ascontiguousarray(power).reshape(c, nd * nr)
-        if median_bits(flat, _noise_cells(nd, nr, first_range, step | 1 if step > 1 else 1),
-                       mid, med_bits):
+        if median_bits(np.ascontiguousarray(flat), cells, mid, med_bits):
             med = med_bits.view(np.float32).astype(np.float64)
             return np.maximum(med / np.log(2.0), np.finfo(np.float64).tiny)
-    if step > 1:
-        # Every k-th cell of the flattened (Doppler, range) grid spreads over both axes; k odd
-        # so that an even range length does not keep the same parity of range bins throughout.
-        # (Gathered straight from the map: no copy of the whole map first.)
-        flat = power.reshape(c, nd * nr)
-        cells = np.take(flat, _noise_cells(nd, nr, first_range, step | 1), axis=1)
-    else:
-        cells = power[:, :, first_range:].reshape(c, -1)
-    assert mid == cells.shape[1] // 2
-    if cells.dtype == np.float32 and np.all(cells >= 0):
+    # (gathered straight from the map: no copy of the whole map first)
+    values = np.take(flat, cells, axis=1)
+    if values.dtype == np.float32 and np.all(values >= 0):
         # Non-negative float32 values order as their bit patterns read as int32, and numpy
         # selects among integers faster (a fifth less time): the same cell is chosen.
-        bits = np.ascontiguousarray(cells).view(np.int32)
+        bits = np.ascontiguousarray(values).view(np.int32)
         med = np.partition(bits, mid, axis=1)[:, mid].view(np.float32).astype(np.float64)
     else:
-        med = np.partition(cells, mid, axis=1)[:, mid].astype(np.float64)
+        med = np.partition(values, mid, axis=1)[:, mid].astype(np.float64)
     return np.maximum(med / np.log(2.0), np.finfo(np.float64).tiny)
 
 

@@ -993,6 +993,10 @@ class RadarProcessor:
             w = w * self._near.focus_sines(uy, uz, rho)
         return w
 
+    _COMPILED_JOINT = True
+    """Whether the numba engine refines cells with several sources in one compiled call
+    (:func:`~._kernels.joint_refine`); False runs the numpy loop (the tests compare them)."""
+
     def _azimuth_peaks(self, prof: np.ndarray, rel: float, floor: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
         """:func:`~coloradar.dsp.angle.azimuth_peaks`, compiled with the numba engine."""
@@ -1125,8 +1129,8 @@ class RadarProcessor:
                                                  w[:, several], ci[several], x[several],
                                                  rho[several], rank[several])
             cell_of = _groups(ci)[0]
-        kb = self._beam_kernels
-        if kb is not None and (not self._focus or self._focus_tables is not None):
+        if (kb is not None and self._COMPILED_JOINT
+                and (not self._focus or self._focus_tables is not None)):
             # the loop below in one compiled call (the same steps and kernels)
             alive = np.empty(ci.size, dtype=bool)
             tables = self._focus_tables if self._focus else _NO_FOCUS
@@ -1337,7 +1341,12 @@ class RadarProcessor:
         idx = np.arange(nmax)
         gram[:, idx, idx] += np.where(used, 0.0, 1.0)                   # padded columns
         rhs = np.einsum("cmn,cm->cn", np.conj(a), xc)
-        sol = np.linalg.solve(gram, rhs[..., None])[..., 0]
+        try:
+            sol = np.linalg.solve(gram, rhs[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            # two sources of a cell with the same weights (one direction): the least-squares
+            # fit of minimum norm (the compiled kernel gives the duplicate nothing instead)
+            sol = (np.linalg.pinv(gram) @ rhs[..., None])[..., 0]
         out[multi] = sol[cell_of, rank]
         return out
 
