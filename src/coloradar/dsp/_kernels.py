@@ -824,7 +824,7 @@ def beam_neighbourhood(rd: Any, nxt: Any, chan: Any, tx_of: Any, num_tx: int, d:
                 out[p, i, k] = (v.real * v.real + v.imag * v.imag) / m2
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=False)
 def _cell_amplitudes(x: Any, row: int, w: Any, cols: Any, n: int,
                      out: Any) -> None:  # pragma: no cover - compiled
     # Least-squares amplitudes of the sources conj(w[:, cols[i]]), i < n, in the vector
@@ -965,8 +965,35 @@ def median_bits(power: Any, cells: Any, k: int, out: Any) -> bool:  # pragma: no
             if (v >> 21) == b:
                 buf[m] = v
                 m += 1
-        out[r] = np.sort(buf[:m])[k - below]
+        out[r] = _select(buf, m, k - below)
     return True
+
+
+@numba.njit(cache=False)
+def _select(buf: Any, m: int, k: int) -> Any:  # pragma: no cover - compiled
+    # the k-th smallest of buf[:m] (Hoare's selection, reordering buf; no compiled sort
+    # to build, a second of numba's time on the first frame)
+    lo, hi = 0, m - 1
+    while lo < hi:
+        a, b, c = buf[lo], buf[(lo + hi) >> 1], buf[hi]
+        piv = max(min(a, b), min(max(a, b), c))          # median of three
+        i, j = lo, hi
+        while i <= j:
+            while buf[i] < piv:
+                i += 1
+            while buf[j] > piv:
+                j -= 1
+            if i <= j:
+                buf[i], buf[j] = buf[j], buf[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return buf[k]
 
 
 @numba.njit(inline="always")
@@ -1028,6 +1055,12 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
     starts[n_cells] = p_n
     count = np.zeros(n_cells, np.int64)
     total = np.empty(m_n, np.complex128)
+    # Flags and counts go to the kernels below as variables, not constants: numba types a
+    # constant argument as a literal and compiles another version of the callee for it
+    # (seconds more on the first frame).
+    on = m_n > 0                                        # True
+    off = not on
+    newton_steps = 2 + 0 * m_n
     for rnd in range(3):
         for c in range(n_cells):
             n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
@@ -1094,7 +1127,7 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         xe = xp.copy()
         if focus:
             _focus_multiply_jit(xe, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
-                                wavenumber, True)
+                                wavenumber, on)
         out_z, out_p = np.empty(k_n), np.empty(k_n)
         _elevation_search_jit(xe, ca, az_pos, row, row_steer, el_sines, ky, grid_rho, out_z,
                               out_p)
@@ -1102,16 +1135,16 @@ def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any,
         if refine:
             if focus:
                 _focus_multiply_jit(xp, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
-                                    wavenumber, True)
+                                    wavenumber, on)
             ny, nz, npw = np.empty(k_n), np.empty(k_n), np.empty(k_n)
-            _newton_refine_jit(xp, ca, cb, az_pos, el_pos, ky, kz, step_y, step_z, 2, True,
+            _newton_refine_jit(xp, ca, cb, az_pos, el_pos, ky, kz, step_y, step_z, newton_steps, on,
                                ny, nz, npw)
             ky, kz = ny, nz
         wk = np.empty((m_n, k_n), np.complex64)
         _steer_columns_jit(ca, cb, az_pos, el_pos, ky, kz, wk)
         if focus:
             _focus_multiply_jit(wk, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
-                                wavenumber, False)
+                                wavenumber, off)
         for k in range(k_n):
             q = idx[k]
             uy[q], uz[q] = ky[k], kz[k]
