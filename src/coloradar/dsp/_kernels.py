@@ -25,10 +25,10 @@ import numba
 import numpy as np
 
 __all__ = ["CACHE_PROBLEM", "LANES", "azimuth_peaks", "beam_neighbourhood", "elevation_search",
-           "focus_multiply", "gather_rows", "group_peaks", "joint_amplitudes", "joint_refine",
-           "median_bits", "newton_refine", "peak_over_doppler", "peak_over_doppler_planar",
-           "power", "prepare_chirps", "secondary_bound", "secondary_bound_focused",
-           "secondary_residual", "source_pairs", "steer_columns"]
+           "focus_multiply", "gather_rows", "group_peaks", "joint_amplitudes", "joint_powers",
+           "joint_residuals", "joint_round", "median_bits", "newton_refine", "peak_over_doppler",
+           "peak_over_doppler_planar", "power", "prepare_chirps", "secondary_bound",
+           "secondary_bound_focused", "secondary_residual", "source_pairs", "steer_columns"]
 
 CACHE_PROBLEM: str | None = None
 """Why the kernels are not cached on disk in this process (None: they are)."""
@@ -1018,139 +1018,97 @@ def _fit_total(w: Any, amps: Any, cols: Any, n: int, total: Any) -> None:  # pra
 
 
 @_jit(nogil=True)
-def joint_refine(x: Any, w: Any, uy: Any, uz: Any, peak: Any, ci: Any, rho: Any, floor: Any,
-                 dyn: float, f_threshold: Any, refine: bool, ca: float, cb: float,
-                 az_pos: Any, el_pos: Any, row: Any, row_steer: Any, el_sines: Any,
-                 grid_rho: float, step_y: float, step_z: float, focus: bool, t_yz: Any,
-                 t_sq: Any, tx_idx: Any, r_yz: Any, r_sq: Any, rx_idx: Any, ref: Any,
-                 wavenumber: float, alive: Any) -> None:  # pragma: no cover - compiled
-    """The joint refinement of cells with several sources
-    (:meth:`coloradar.dsp.processor.RadarProcessor._resolve_peaks`'s loop, in one call).
-
-    Peaks ``p`` (``ci`` non-decreasing: a cell's peaks consecutive, its strongest first) with
-    the cell's vector ``x[p]`` complex64 ``(P, M)``, weights ``w`` complex64 ``(M, P)``,
-    sines ``uy, uz``, beam powers ``peak``, focusing ranges ``rho`` [m] and the cell's noise
-    ``floor`` (float64 ``(P,)`` each). Three rounds: the cell's joint least-squares
-    amplitudes; a source is kept while its power reaches the floor, ``dyn`` times the cell's
-    strongest and (from the second round) the F-test floor of what the fit leaves
-    (``f_threshold[ν]·RSS/ν/M``, ``ν = max(M − 2n, 1)``); the strongest source of a cell
-    always stays. Between rounds each source of a cell that still has several gets its
-    elevation (:func:`elevation_search`) and, with ``refine``, Newton steps
-    (:func:`newton_refine`) on the vector less the other sources' fit, and new weights
-    (:func:`steer_columns`); ``focus``: those vectors and weights carry the near-field
-    phases (:func:`focus_multiply`'s tables). At the end the power of every source of a
-    cell with several is its joint amplitude's. Updates ``uy, uz, peak, w`` in place and
-    writes ``alive`` (bool ``(P,)``): the peaks kept."""
-    p_n, m_n = x.shape
-    alive[:] = True
-    amps = np.empty(p_n, np.complex128)
-    cols = np.empty(p_n, np.int64)
-    # cell boundaries (cells never change; only which of their peaks are alive)
-    starts = np.empty(p_n + 1, np.int64)
-    n_cells = 0
-    for p in range(p_n):
-        if p == 0 or ci[p] != ci[p - 1]:
-            starts[n_cells] = p
-            n_cells += 1
-    starts[n_cells] = p_n
-    count = np.zeros(n_cells, np.int64)
+def joint_round(x: Any, w: Any, starts: Any, alive: Any, floor: Any, dyn: float,
+                f_threshold: Any, residual_test: bool, amps: Any,
+                count: Any) -> bool:  # pragma: no cover - compiled
+    """One round of the keep tests of cells with several sources
+    (:meth:`coloradar.dsp.processor.RadarProcessor._resolve_peaks`): each cell's joint
+    least-squares amplitudes of its alive peaks (cell ``c``: peaks ``starts[c] …
+    starts[c + 1] − 1``, its strongest first; vector ``x[p]`` complex64 ``(P, M)``, weights
+    ``w`` complex64 ``(M, P)``); a source stays while its power reaches the cell's noise
+    ``floor[p]``, ``dyn`` times the cell's strongest and, with ``residual_test``, the F-test
+    floor of what the fit leaves (``f_threshold[ν]·RSS/ν/M``, ``ν = max(M − 2n, 1)``); the
+    strongest alive source of a cell always stays. Updates ``alive`` (bool ``(P,)``), writes
+    the amplitudes (complex128 ``(P,)``, alive peaks) and the sources left per cell
+    (``count`` int64 ``(cells,)``); returns whether a cell still has several."""
+    m_n = x.shape[1]
+    cols = np.empty(x.shape[0], np.int64)
     total = np.empty(m_n, np.complex128)
-    # Flags and counts go to the kernels below as variables, not constants: numba types a
-    # constant argument as a literal and compiles another version of the callee for it
-    # (seconds more on the first frame).
-    on = m_n > 0                                        # True
-    off = not on
-    newton_steps = 2 + 0 * m_n
-    for rnd in range(3):
-        for c in range(n_cells):
-            n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
-            _cell_amplitudes(x, starts[c], w, cols, n, amps)
-            # (|·| then squared as numpy's abs(·)**2 does; numba's |·| is hypot, numpy's its
-            # own: the powers agree to 1 ulp. A NaN power makes the cell's top NaN, as
-            # numpy's maximum.reduceat does, and then only the strongest source stays.)
-            top = 0.0
-            for i in range(n):
-                v = abs(amps[cols[i]])
-                p2 = v * v
-                if p2 > top or p2 != p2:
-                    top = p2
-                if top != top:
-                    break
-            rf = 0.0
-            if rnd > 0:
-                _fit_total(w, amps, cols, n, total)
-                rss = 0.0
-                for m in range(m_n):
-                    v = abs(complex(x[starts[c], m]) - total[m])
-                    rss += v * v
-                nu = max(m_n - 2 * n, 1)
-                rf = f_threshold[nu] * rss / nu / m_n
-            kept = 0
-            for i in range(n):
-                q = cols[i]
-                v = abs(amps[q])
-                pw = v * v
-                if i > 0 and not (pw >= floor[q] and pw >= top * dyn and pw >= rf):
-                    alive[q] = False
-                else:
-                    kept += 1
-            count[c] = kept
-        multi = False
-        for c in range(n_cells):
-            multi = multi or count[c] > 1
-        if not multi or rnd == 2:
-            break
-        # each source of a cell with several: the cell's vector less the others' fit
-        k_n = 0
-        for c in range(n_cells):
-            if count[c] > 1:
-                for p in range(starts[c], starts[c + 1]):
-                    if alive[p]:
-                        k_n += 1
-        xp = np.empty((k_n, m_n), np.complex64)
-        idx = np.empty(k_n, np.int64)
-        k = 0
-        for c in range(n_cells):
-            if count[c] < 2:
-                continue
-            n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
-            _cell_amplitudes(x, starts[c], w, cols, n, amps)
+    multi = False
+    for c in range(starts.size - 1):
+        n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
+        _cell_amplitudes(x, starts[c], w, cols, n, amps)
+        # (|·| then squared as numpy's abs(·)**2 does; numba's |·| is hypot, numpy's its
+        # own: the powers agree to 1 ulp. A NaN power makes the cell's top NaN, as numpy's
+        # maximum.reduceat does, and then only the strongest source stays.)
+        top = 0.0
+        for i in range(n):
+            v = abs(amps[cols[i]])
+            p2 = v * v
+            if p2 > top or p2 != p2:
+                top = p2
+            if top != top:
+                break
+        rf = 0.0
+        if residual_test:
             _fit_total(w, amps, cols, n, total)
-            for i in range(n):
-                q = cols[i]
-                for m in range(m_n):
-                    xp[k, m] = (complex(x[q, m]) - total[m]
-                                + complex(w[m, q]).conjugate() * amps[q])
-                idx[k] = q
-                k += 1
-        ky, kz, kr = uy[idx], np.zeros(k_n), rho[idx]
-        xe = xp.copy()
-        if focus:
-            _focus_multiply_jit(xe, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
-                                wavenumber, on)
-        out_z, out_p = np.empty(k_n), np.empty(k_n)
-        _elevation_search_jit(xe, ca, az_pos, row, row_steer, el_sines, ky, grid_rho, out_z,
-                              out_p)
-        kz = out_z
-        if refine:
-            if focus:
-                _focus_multiply_jit(xp, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
-                                    wavenumber, on)
-            ny, nz, npw = np.empty(k_n), np.empty(k_n), np.empty(k_n)
-            _newton_refine_jit(xp, ca, cb, az_pos, el_pos, ky, kz, step_y, step_z, newton_steps, on,
-                               ny, nz, npw)
-            ky, kz = ny, nz
-        wk = np.empty((m_n, k_n), np.complex64)
-        _steer_columns_jit(ca, cb, az_pos, el_pos, ky, kz, wk)
-        if focus:
-            _focus_multiply_jit(wk, ky, kz, kr, t_yz, t_sq, tx_idx, r_yz, r_sq, rx_idx, ref,
-                                wavenumber, off)
-        for k in range(k_n):
-            q = idx[k]
-            uy[q], uz[q] = ky[k], kz[k]
+            rss = 0.0
             for m in range(m_n):
-                w[m, q] = wk[m, k]
-    for c in range(n_cells):
+                v = abs(complex(x[starts[c], m]) - total[m])
+                rss += v * v
+            nu = max(m_n - 2 * n, 1)
+            rf = f_threshold[nu] * rss / nu / m_n
+        kept = 0
+        for i in range(n):
+            q = cols[i]
+            v = abs(amps[q])
+            pw = v * v
+            if i > 0 and not (pw >= floor[q] and pw >= top * dyn and pw >= rf):
+                alive[q] = False
+            else:
+                kept += 1
+        count[c] = kept
+        multi = multi or kept > 1
+    return multi
+
+
+@_jit(nogil=True)
+def joint_residuals(x: Any, w: Any, starts: Any, alive: Any, count: Any,
+                    out_x: Any, out_p: Any) -> int:  # pragma: no cover - compiled
+    """For each alive source of a cell that has several (``count[c] > 1``; cells, ``x``
+    and ``w`` as :func:`joint_round`): the cell's vector less the joint fit of its other
+    sources, ``x − Σ_q conj(w_q)·a_q + conj(w_p)·a_p`` (``a`` the joint amplitudes), into
+    the rows of ``out_x`` (complex64 ``(≥ K, M)``) and the peak into ``out_p`` (int64);
+    returns ``K``. Each source is then refined on its own row."""
+    m_n = x.shape[1]
+    cols = np.empty(x.shape[0], np.int64)
+    amps = np.empty(x.shape[0], np.complex128)
+    total = np.empty(m_n, np.complex128)
+    k = 0
+    for c in range(starts.size - 1):
+        if count[c] < 2:
+            continue
+        n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
+        _cell_amplitudes(x, starts[c], w, cols, n, amps)
+        _fit_total(w, amps, cols, n, total)
+        for i in range(n):
+            q = cols[i]
+            for m in range(m_n):
+                out_x[k, m] = (complex(x[q, m]) - total[m]
+                               + complex(w[m, q]).conjugate() * amps[q])
+            out_p[k] = q
+            k += 1
+    return k
+
+
+@_jit(nogil=True)
+def joint_powers(x: Any, w: Any, starts: Any, alive: Any, count: Any,
+                 peak: Any) -> None:  # pragma: no cover - compiled
+    """``peak[p] = |a_p|²`` of each alive source of a cell with several (cells, ``x``, ``w``
+    as :func:`joint_round`; ``a`` the joint amplitudes), float64 ``(P,)`` in place."""
+    cols = np.empty(x.shape[0], np.int64)
+    amps = np.empty(x.shape[0], np.complex128)
+    for c in range(starts.size - 1):
         if count[c] < 2:
             continue
         n = _alive_of_cell(alive, starts[c], starts[c + 1], cols)
@@ -1452,12 +1410,6 @@ def power(values: Any, out: Any) -> None:  # pragma: no cover - compiled
         b = values[2 * i + 1]
         out[i] = a * a + b * b
 
-# (the raw dispatchers, for kernels that call them: the names below become wrappers)
-_elevation_search_jit = elevation_search
-_focus_multiply_jit = focus_multiply
-_newton_refine_jit = newton_refine
-_steer_columns_jit = steer_columns
-
 _warn_no_cache()
 gather_rows = _Announced(gather_rows)
 peak_over_doppler = _Announced(peak_over_doppler)
@@ -1468,7 +1420,9 @@ beam_neighbourhood = _Announced(beam_neighbourhood)
 focus_multiply = _Announced(focus_multiply)
 elevation_search = _Announced(elevation_search)
 joint_amplitudes = _Announced(joint_amplitudes)
-joint_refine = _Announced(joint_refine)
+joint_round = _Announced(joint_round)
+joint_residuals = _Announced(joint_residuals)
+joint_powers = _Announced(joint_powers)
 group_peaks = _Announced(group_peaks)
 median_bits = _Announced(median_bits)
 azimuth_peaks = _Announced(azimuth_peaks)

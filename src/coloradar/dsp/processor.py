@@ -994,8 +994,9 @@ class RadarProcessor:
         return w
 
     _COMPILED_JOINT = True
-    """Whether the numba engine refines cells with several sources in one compiled call
-    (:func:`~._kernels.joint_refine`); False runs the numpy loop (the tests compare them)."""
+    """Whether the numba engine refines cells with several sources with the compiled keep
+    tests (:func:`~._kernels.joint_round`); False runs the numpy loop (the tests compare
+    them)."""
 
     def _azimuth_peaks(self, prof: np.ndarray, rel: float, floor: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -1131,18 +1132,32 @@ class RadarProcessor:
             cell_of = _groups(ci)[0]
         if (kb is not None and self._COMPILED_JOINT
                 and (not self._focus or self._focus_tables is not None)):
-            # the loop below in one compiled call (the same steps and kernels)
-            alive = np.empty(ci.size, dtype=bool)
-            tables = self._focus_tables if self._focus else _NO_FOCUS
-            assert tables is not None
-            w = np.ascontiguousarray(w, dtype=np.complex64)
-            uy, uz, peak = _f64(uy).copy(), _f64(uz).copy(), _f64(peak).copy()
-            kb["k"].joint_refine(_c64(x), w, uy, uz, peak, ci.astype(np.int64), _f64(rho),
-                                 _f64(floor[ci]), float(self._angle_dynamic),
-                                 self._f_threshold, bool(refine), kb["ca"], kb["cb"],
-                                 kb["az"], kb["el"], kb["row"], kb["row_steer"],
-                                 kb["el_sines"], float(g.rho), step[0], step[1],
-                                 bool(self._focus), *tables, self._near.wavenumber, alive)
+            # the loop below with its numpy glue compiled: the keep tests and the vectors
+            # less the other sources' fit in kernels, the refinement steps by the same
+            # kernels as the loop's (called from here: linked into one compiled loop they
+            # cost seconds more of compiling on the first frame)
+            starts = np.flatnonzero(_firsts(ci, end=True))
+            alive = np.ones(ci.size, dtype=bool)
+            count = np.empty(starts.size - 1, dtype=np.int64)
+            amps = np.empty(ci.size, dtype=np.complex128)
+            xc, w = _c64(x), np.ascontiguousarray(w, dtype=np.complex64)
+            floor_p = _f64(floor[ci])
+            for it in range(3):
+                multi_left = kb["k"].joint_round(xc, w, starts, alive, floor_p,
+                                                 float(self._angle_dynamic), self._f_threshold,
+                                                 it > 0, amps, count)
+                if not multi_left or it == 2:
+                    break
+                xp = np.empty(xc.shape, dtype=np.complex64)
+                j = np.empty(ci.size, dtype=np.int64)
+                k = kb["k"].joint_residuals(xc, w, starts, alive, count, xp, j)
+                xp, j = xp[:k], j[:k]
+                # elevation afresh on what is left (two sources fool the sparse rows)
+                uz[j], _ = self._elevation_search(xp, uy[j], rho[j])
+                if refine:
+                    uy[j], uz[j], _ = newton(xp, uy[j], uz[j], rho[j])
+                w[:, j] = self._steer(uy[j], uz[j], rho[j])
+            kb["k"].joint_powers(xc, w, starts, alive, count, peak)
             uy, uz, peak, w, ci = uy[alive], uz[alive], peak[alive], w[:, alive], ci[alive]
             return self._join_lone(lone, uy, uz, peak, w, ci)
         for it in range(3):
@@ -1618,11 +1633,6 @@ def _group_peaks(stat: np.ndarray, mask: np.ndarray, noise: np.ndarray,
         beside[((sd + o) % nd)[:, None],
                np.clip(sr[:, None] + np.array([-1, 0, 1]), 0, nr - 1)] = True
     return peaks | (mask & (along_d | along_r) & beside)
-
-
-# focus_multiply's tables where nothing is focused (joint_refine then leaves them unread)
-_NO_FOCUS = (np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros((0, 2)),
-             np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.complex128))
 
 
 def _groups(ci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
