@@ -374,9 +374,13 @@ def test_compiled_channel_noise_picks_the_same_median_cell():
         want = channel_noise(p, first)
         got = channel_noise(p, first, engine="numba")
         np.testing.assert_array_equal(got, want)
-        # (and the compiled selection made it: not numpy's, taken over on a refusal)
+        # (and the compiled selection makes it, not numpy's taking over on a refusal: the
+        # kernel alone gives each row's k-th value)
+        flat = p.reshape(shape[0], -1)
+        k = flat.shape[1] // 3
         out = np.empty(shape[0], dtype=np.int32)
-        assert _kernels.median_bits(p.reshape(shape[0], -1), np.arange(p[0].size), 0, out)
+        assert _kernels.median_bits(flat, np.arange(flat.shape[1]), k, out)
+        np.testing.assert_array_equal(out.view(np.float32), np.sort(flat, axis=1)[:, k])
         # the median of an exponential is ln 2 times its mean: sig2 estimates the mean
         if shape[1] * shape[2] > 1000:
             assert np.all(np.abs(got[2:] / (p[2:].mean(axis=(1, 2))) - 1) < 0.25)

@@ -525,7 +525,7 @@ class RadarProcessor:
         assert self._near_terms is not None
         ref = self._near_terms[4]
         return (*positions(self._near.tx), *positions(self._near.rx),
-                np.exp(1j * ref).astype(np.complex128))
+                np.exp(1j * ref))
 
     def _init_beam_kernels(self) -> dict[str, Any] | None:
         """Tables of the compiled per-detection beam kernels (:mod:`coloradar.dsp._kernels`):
@@ -1062,10 +1062,9 @@ class RadarProcessor:
                                       _f64(uy0), _f64(uz0), step[0], step[1], 2, True, out[0],
                                       out[1], out[2])
                 return out[0], out[1], out[2]
-            if not self._focus:
-                return newton_refine(g, xv, uy0, uz0, step)
-            f = self._near.focus_sines(uy0, uz0, rr, transpose=True)   # (K, M)
-            return newton_refine(g, xv * f, uy0, uz0, step)
+            if self._focus:
+                xv = self._focused(xv, uy0, uz0, rr)
+            return newton_refine(g, xv, uy0, uz0, step)
 
         primary = np.ones(ci.size, dtype=bool)
         primary[1:] = ci[1:] != ci[:-1]
@@ -1129,7 +1128,6 @@ class RadarProcessor:
             uy, uz, peak, w, ci, x, rho, rank = (uy[several], uz[several], peak[several],
                                                  w[:, several], ci[several], x[several],
                                                  rho[several], rank[several])
-            cell_of = _groups(ci)[0]
         if (kb is not None and self._COMPILED_JOINT
                 and (not self._focus or self._focus_tables is not None)):
             # the loop below with its numpy glue compiled: the keep tests and the vectors
@@ -1160,6 +1158,8 @@ class RadarProcessor:
             kb["k"].joint_powers(xc, w, starts, alive, count, peak)
             uy, uz, peak, w, ci = uy[alive], uz[alive], peak[alive], w[:, alive], ci[alive]
             return self._join_lone(lone, uy, uz, peak, w, ci)
+        if lone is not None:
+            cell_of = _groups(ci)[0]
         for it in range(3):
             amps = self._joint_amplitudes(x, w, cell_of, rank)
             pw = np.abs(amps) ** 2
