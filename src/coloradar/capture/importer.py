@@ -253,8 +253,10 @@ def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Fram
             data, idx = seg[dev]
             n_idx, _, ts = read_idx(idx)
             raw = _read_file(data)
-            n = _whole_frames(raw.size, dev_fb, replace(cfg, num_frames=0), str(data),
-                              spec.partial_last_frame, notes)
+            # One device's share of a frame: its four RX.
+            dev_cfg = replace(cfg, num_frames=0, rx_channels=cfg.rx_channels[4 * d:4 * d + 4])
+            n = _whole_frames(raw.size, dev_fb, dev_cfg, str(data), spec.partial_last_frame,
+                              notes)
             if n < n_idx:
                 raise FormatError(f"{data}: {n} whole frames of {dev_fb:,} bytes but {idx.name} "
                                   f"indexes {n_idx}: frame {n} is "

@@ -1,0 +1,239 @@
+"""``coloradar import-capture``: raw TI captures laid out by an independent test-side writer
+(tests/_capture_writer.py) in every byte order are imported, and the run's frames hold the
+written values and show the simulated targets at their range, angle and range rate."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import _capture_writer as cw
+from coloradar.capture import import_capture
+from coloradar.cli.main import main
+from coloradar.dataset import open_sequence
+from coloradar.dsp import RadarProcessor
+from coloradar.errors import (
+    FormatError,
+    MissingDataError,
+    OutputExistsError,
+    SettingsError,
+)
+from coloradar.formats import read_radar_pointcloud
+
+ORDER = [0, 2, 1]                        # TX0, TX2, TX1: the ColoRadar single chip's order
+TARGETS = [(5.0, 20.0, 1.6), (9.0, -30.0, -2.4)]   # range m, azimuth deg, range rate m/s
+
+
+@pytest.fixture(scope="module")
+def frames() -> np.ndarray:
+    return cw.target_frames(cw.truth_calib(ORDER), TARGETS, 2)
+
+
+def _open(run: Path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # the other radar's preset, the rig's extrinsics
+        return open_sequence(run)
+
+
+def _assert_targets(run: Path, radar: str, targets, frame: int = 0) -> None:
+    """Each target is detected within a range bin, 3° of azimuth and half a Doppler bin."""
+    seq = _open(run)
+    calib = seq.calib.radar(radar)
+    det = RadarProcessor(calib).detect(seq.stream(f"{radar}/adc")[frame])
+    w = calib.waveform
+    for r, az, v in targets:
+        ok = ((np.abs(det.range - r) < w.range_bin_width)
+              & (np.abs(np.degrees(det.azimuth) - az) < 3.0)
+              & (np.abs(det.range_rate - v) < 0.5 * w.velocity_bin_width))
+        found = np.c_[det.range, np.degrees(det.azimuth), det.range_rate].round(2)
+        assert ok.any(), f"target at {r} m, {az}°, {v} m/s not found; detections: {found}"
+
+
+def _write(tmp: Path, name: str, data: bytes, cfg_name: str, cfg_text: str,
+           setup: str | None = None) -> tuple[Path, Path]:
+    tmp.mkdir(parents=True, exist_ok=True)
+    (tmp / name).write_bytes(data)
+    (tmp / cfg_name).write_text(cfg_text)
+    if setup is not None:
+        (tmp / cfg_name.replace(".mmwave.json", ".setup.json")).write_text(setup)
+    return tmp / name, tmp / cfg_name
+
+
+# ------------------------------------------------------------------------ byte layouts
+LAYOUTS = {
+    # name: (writer kwargs, config kind, config kwargs)
+    "sdk-2lane-iq": (dict(lanes=2, iq="iq"), "cfg", dict()),
+    "sdk-2lane-qi": (dict(lanes=2, iq="qi"), "cfg", dict(swap=True)),
+    "sdk-real": (dict(lanes=2, real=True), "cfg", dict(real=True)),
+    "studio-4lane-iq": (dict(lanes=4, iq="iq", interleave=True), "json",
+                        dict(lanes=4, interleave=True)),
+    "studio-4lane-qi": (dict(lanes=4, iq="qi", interleave=True), "json",
+                        dict(lanes=4, interleave=True, swap=True)),
+    "studio-2lane-complex2x": (dict(lanes=2, iq="iq"), "json", dict(complex2x=True)),
+}
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_dca1000_layouts_round_trip_to_the_targets(tmp_path, frames, layout):
+    wkw, kind, ckw = LAYOUTS[layout]
+    data = cw.dca1000_bytes(frames, **wkw)
+    if kind == "cfg":
+        cap, cfg = _write(tmp_path, "adc_data.bin", data, "profile.cfg", cw.sdk_cfg(ORDER, **ckw))
+        board = "AWR1843BOOST"
+    else:
+        mm, setup = cw.studio_json(ORDER, **ckw)
+        cap, cfg = _write(tmp_path, "adc_data.bin", data, "capture.mmwave.json", mm, setup)
+        board = None                                # from the setup.json's mmWaveDevice
+    res = import_capture(cap, tmp_path / "run", config=cfg, board=board, start_time=1.7e9)
+    assert res.frames_written == 2 and res.radar == "single_chip"
+    seq = _open(tmp_path / "run")
+    want = frames.real if wkw.get("real") else frames
+    for i in range(2):
+        np.testing.assert_array_equal(seq.single_chip.adc[i], want[i].astype(np.complex64))
+    np.testing.assert_allclose(seq.single_chip.adc.timestamps, 1.7e9 + np.array([0.0, 0.05]))
+    _assert_targets(tmp_path / "run", "single_chip", TARGETS)
+
+
+def test_wrong_iq_order_mirrors_the_targets(tmp_path, frames):
+    """Reading QI bytes as IQ conjugates the signal: a target at range R shows at the mirrored
+    beat frequency, so nothing is found at 5 m and 20° (the option matters)."""
+    cap, cfg = _write(tmp_path, "adc_data.bin", cw.dca1000_bytes(frames, iq="qi"),
+                      "profile.cfg", cw.sdk_cfg(ORDER, swap=True))
+    import_capture(cap, tmp_path / "run", config=cfg, board="awr1843", iq_order="iq")
+    with pytest.raises(AssertionError, match="not found"):
+        _assert_targets(tmp_path / "run", "single_chip", TARGETS[:1])
+
+
+# ------------------------------------------------------------------------ packet dumps
+def test_packet_dump_with_drops_reports_frames_and_never_shifts(tmp_path):
+    fr = cw.target_frames(cw.truth_calib(ORDER), TARGETS, 4, seed=1)
+    stream = cw.dca1000_bytes(fr)
+    fb = len(stream) // 4
+    # Packet 33 straddles frames 0 and 1 (bytes 48,048..49,503; a frame is 49,152 bytes).
+    drop = (33,)
+    assert 33 * 1456 < fb < 34 * 1456
+    dump = cw.packet_dump(stream, drop=drop)
+    cap, cfg = _write(tmp_path, "adc_data_Raw_0.bin", dump, "profile.cfg",
+                      cw.sdk_cfg(ORDER, frames=4))
+    res = import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    assert res.left_out == (0, 1) and res.dropped_packets == 1 and res.frames_written == 2
+    seq = _open(tmp_path / "run")
+    # Frames 2 and 3 keep their numbers and bytes; frames 0 and 1 are holes (nan timestamps).
+    assert list(seq.single_chip.adc.frame_ids) == [2, 3]
+    np.testing.assert_array_equal(seq.single_chip.adc[0], fr[2].astype(np.complex64))
+    np.testing.assert_array_equal(seq.single_chip.adc[1], fr[3].astype(np.complex64))
+    rec = json.loads((tmp_path / "run" / "capture_import.json").read_text())
+    assert rec["left_out"] == [0, 1] and any("dropped packets" in n for n in rec["notes"])
+    # Zero-filled instead: four files, frames 0 and 1 all zeros, the others intact.
+    res = import_capture(cap, tmp_path / "run0", config=cfg, board="AWR1843BOOST",
+                         dropped="zero")
+    assert res.zero_filled == (0, 1) and res.frames_written == 4
+    seq = _open(tmp_path / "run0")
+    assert not np.any(seq.single_chip.adc[1])
+    np.testing.assert_array_equal(seq.single_chip.adc[3], fr[3].astype(np.complex64))
+    _assert_targets(tmp_path / "run0", "single_chip", TARGETS, frame=2)
+
+
+def test_packet_dump_cut_inside_a_frame_is_named(tmp_path, frames):
+    stream = cw.dca1000_bytes(frames)
+    dump = cw.packet_dump(stream[:len(stream) - 1000])
+    cap, cfg = _write(tmp_path, "adc_data_Raw_0.bin", dump, "p.cfg", cw.sdk_cfg(ORDER))
+    with pytest.raises(FormatError, match=r"frame 1 \(from 0\) has 48,152 bytes, 1,000 bytes short"):
+        import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    res = import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST",
+                         partial_last_frame="drop")
+    assert res.frames_written == 1
+
+
+# ------------------------------------------------------------------------------ MMWCAS
+CASCADE_W = dict(cw.SMALL, loops=8)
+# Slot order of the ColoRadar cascade (its antenna_cfg's TX order), as global TX numbers.
+CASCADE_ORDER = [11, 10, 9, 2, 1, 0, 8, 7, 6, 5, 4, 3]
+CASCADE_TARGETS = [(6.0, 15.0, 0.5), (10.0, -25.0, -0.9)]
+
+
+def _cascade(tmp_path: Path, *, truncate: str | None = None, nf: int = 3
+             ) -> tuple[Path, Path, np.ndarray, np.ndarray]:
+    calib = cw.truth_calib(CASCADE_ORDER, CASCADE_W, tx_table=cw.CASCADE_TX,
+                           rx_pos=[(a, 0) for a in cw.CASCADE_RX], num_rx=16)
+    fr = cw.target_frames(calib, CASCADE_TARGETS, nf, amplitude=2e4)
+    ticks = 5_000_000 + np.arange(nf) * 50_000 + np.array([0, 7, 3])[:nf]   # µs, jittered
+    cw.write_mmwcas(tmp_path / "capture", fr, ticks, truncate_device=truncate)
+    (tmp_path / "cascade.json").write_text(cw.cascade_json(CASCADE_ORDER, w=CASCADE_W, frames=nf))
+    return tmp_path / "capture", tmp_path / "cascade.json", fr, ticks
+
+
+def test_mmwcas_folder_round_trips_with_rx_order_and_idx_timestamps(tmp_path):
+    cap, cfg, fr, ticks = _cascade(tmp_path)
+    res = import_capture(cap, tmp_path / "run", config=cfg, start_time=1.7e9)
+    assert res.radar == "cascade" and res.board == "MMWCAS-RF-EVM"
+    assert res.frames_written == 2            # the first frame (before the config settles) left out
+    seq = _open(tmp_path / "run")
+    np.testing.assert_array_equal(seq.cascade.adc[0], fr[1].astype(np.complex64))
+    np.testing.assert_allclose(seq.cascade.adc.timestamps,
+                               1.7e9 + (ticks[1:] - ticks[1]) * 1e-6, atol=1e-7)
+    _assert_targets(tmp_path / "run", "cascade", CASCADE_TARGETS)
+    res = import_capture(cap, tmp_path / "run_all", config=cfg, keep_first_frame=True)
+    assert res.frames_written == 3
+
+
+def test_mmwcas_missing_or_short_device_file_is_named(tmp_path):
+    cap, cfg, _, _ = _cascade(tmp_path, truncate="slave1", nf=2)
+    short = r"slave1_0000_data\.bin.*4 RX.*frame 1 \(from 0\) has 98,204 bytes, 100 bytes short"
+    with pytest.raises(FormatError, match=short):
+        import_capture(cap, tmp_path / "run", config=cfg)
+    (cap / "slave2_0000_data.bin").unlink()
+    with pytest.raises(MissingDataError, match=r"missing slave2_0000_data\.bin"):
+        import_capture(cap, tmp_path / "run", config=cfg)
+    assert not (tmp_path / "run").exists()
+
+
+# ----------------------------------------------------------------------- bad captures
+def test_bad_captures_get_named_errors_and_leave_nothing(tmp_path, frames):
+    data = cw.dca1000_bytes(frames)
+    cap, cfg = _write(tmp_path, "adc_data.bin", data[:-6], "p.cfg", cw.sdk_cfg(ORDER))
+    with pytest.raises(FormatError, match=r"frame 1 \(from 0\) has 49,146 bytes, 6 bytes short"):
+        import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    # A config with 2 RX where the data has 4: twice the frames the config asks for.
+    cap, cfg = _write(tmp_path, "adc_data.bin", data, "p2.cfg", cw.sdk_cfg(ORDER, rx_mask=0x3))
+    with pytest.raises(FormatError, match="disagrees with the file"):
+        import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    cap, cfg = _write(tmp_path, "adc_data.bin", data, "p.cfg", cw.sdk_cfg(ORDER))
+    with pytest.raises(SettingsError, match="unknown board 'AWR9999'"):
+        import_capture(cap, tmp_path / "run", config=cfg, board="AWR9999")
+    with pytest.raises(SettingsError, match="does not name the radar board"):
+        import_capture(cap, tmp_path / "run", config=cfg)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adc_data.bin", "p.cfg", "p2.cfg"]
+    # An existing run is not replaced without --overwrite; a folder that no import wrote never.
+    import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    with pytest.raises(OutputExistsError):
+        import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST", overwrite=True)
+    (tmp_path / "mine").mkdir()
+    with pytest.raises(OutputExistsError, match="not a run written by import-capture"):
+        import_capture(cap, tmp_path / "mine", config=cfg, board="AWR1843BOOST", overwrite=True)
+    with pytest.raises(SettingsError, match="would contain the capture"):
+        import_capture(cap, tmp_path, config=cfg, board="AWR1843BOOST", overwrite=True)
+
+
+# ---------------------------------------------------------------------------- the CLI
+def test_cli_import_then_process_finds_the_targets(tmp_path, frames, capsys):
+    cap, cfg = _write(tmp_path, "adc_data.bin", cw.dca1000_bytes(frames), "profile.cfg",
+                      cw.sdk_cfg(ORDER))
+    run, out = tmp_path / "my_run", tmp_path / "out"
+    assert main(["import-capture", str(cap), str(run), "--config", str(cfg),
+                 "--board", "AWR1843BOOST", "--start-time", "1700000000"]) == 0
+    assert "2 single_chip frames" in capsys.readouterr().out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["process", str(run), "--out", str(out), "--jobs", "1", "--quiet",
+                     "--products", "pointclouds"]) == 0
+    pts = read_radar_pointcloud(out / "single_chip/pointclouds/data/radar_pointcloud_0.bin")
+    rng = np.linalg.norm(pts[:, :3], axis=1)
+    az = np.degrees(np.arctan2(pts[:, 1], pts[:, 0]))
+    for r, a, v in TARGETS:
+        assert np.any((np.abs(rng - r) < 0.4) & (np.abs(az - a) < 3) & (np.abs(pts[:, 4] - v) < 0.4))
