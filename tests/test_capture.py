@@ -5,6 +5,7 @@ written values and show the simulated targets at their range, angle and range ra
 from __future__ import annotations
 
 import json
+import runpy
 import warnings
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from coloradar.errors import (
 from coloradar.formats import read_radar_pointcloud
 
 ORDER = [0, 2, 1]                        # TX0, TX2, TX1: the ColoRadar single chip's order
+ROOT = Path(__file__).resolve().parents[1]
 TARGETS = [(5.0, 20.0, 1.6), (9.0, -30.0, -2.4)]   # range m, azimuth deg, range rate m/s
 
 
@@ -221,19 +223,26 @@ def test_bad_captures_get_named_errors_and_leave_nothing(tmp_path, frames):
 
 
 # ---------------------------------------------------------------------------- the CLI
-def test_cli_import_then_process_finds_the_targets(tmp_path, frames, capsys):
-    cap, cfg = _write(tmp_path, "adc_data.bin", cw.dca1000_bytes(frames), "profile.cfg",
-                      cw.sdk_cfg(ORDER))
-    run, out = tmp_path / "my_run", tmp_path / "out"
-    assert main(["import-capture", str(cap), str(run), "--config", str(cfg),
-                 "--board", "AWR1843BOOST", "--start-time", "1700000000"]) == 0
-    assert "2 single_chip frames" in capsys.readouterr().out
+def test_readme_example_capture_imports_and_processes_to_its_targets(tmp_path, capsys,
+                                                                      monkeypatch):
+    """The README's instructions: ``python docs/capture_example.py example_capture``, then
+    ``coloradar import-capture … && coloradar process …``; the points hold the script's
+    targets."""
+    monkeypatch.chdir(tmp_path)
+    script = runpy.run_path(str(ROOT / "docs" / "capture_example.py"))
+    script["main"](Path("example_capture"))
+    assert main(["import-capture", "example_capture/adc_data.bin", "example_run", "--config",
+                 "example_capture/profile.cfg", "--board", "AWR1843BOOST"]) == 0
+    assert "4 single_chip frames" in capsys.readouterr().out
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert main(["process", str(run), "--out", str(out), "--jobs", "1", "--quiet",
-                     "--products", "pointclouds"]) == 0
-    pts = read_radar_pointcloud(out / "single_chip/pointclouds/data/radar_pointcloud_0.bin")
-    rng = np.linalg.norm(pts[:, :3], axis=1)
-    az = np.degrees(np.arctan2(pts[:, 1], pts[:, 0]))
-    for r, a, v in TARGETS:
-        assert np.any((np.abs(rng - r) < 0.4) & (np.abs(az - a) < 3) & (np.abs(pts[:, 4] - v) < 0.4))
+        assert main(["process", "example_run", "--out", "example_out", "--jobs", "1",
+                     "--quiet", "--products", "pointclouds"]) == 0
+    for k in range(4):
+        pts = read_radar_pointcloud(f"example_out/single_chip/pointclouds/data/"
+                                    f"radar_pointcloud_{k}.bin")
+        rng = np.linalg.norm(pts[:, :3], axis=1)
+        az = np.degrees(np.arctan2(pts[:, 1], pts[:, 0]))
+        for r, a, v in script["TARGETS"]:
+            assert np.any((np.abs(rng - r) < 0.4) & (np.abs(az - a) < 3)
+                          & (np.abs(pts[:, 4] - v) < 0.4)), (k, r, a, v)
