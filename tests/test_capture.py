@@ -76,6 +76,8 @@ LAYOUTS = {
     "studio-4lane-qi": (dict(lanes=4, iq="qi", interleave=True), "json",
                         dict(lanes=4, interleave=True, swap=True)),
     "studio-2lane-complex2x": (dict(lanes=2, iq="iq"), "json", dict(complex2x=True)),
+    "studio-4lane-real": (dict(lanes=4, real=True, interleave=True), "json",
+                          dict(lanes=4, interleave=True, real=True)),
 }
 
 
@@ -192,6 +194,33 @@ def test_mmwcas_missing_or_short_device_file_is_named(tmp_path):
     with pytest.raises(MissingDataError, match=r"missing slave2_0000_data\.bin"):
         import_capture(cap, tmp_path / "run", config=cfg)
     assert not (tmp_path / "run").exists()
+
+
+def test_imported_antennas_are_coloradars_for_its_tx_orders(tmp_path, frames):
+    """With ColoRadar's TX orders, the boards' layouts give the antenna positions of the
+    released calibration (read from the reference files, never copied)."""
+    from _synth import REFERENCE_CALIB
+    from coloradar.calib import load_calibration
+    if not REFERENCE_CALIB.is_dir():
+        pytest.skip(f"reference calibration not at {REFERENCE_CALIB}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = load_calibration(REFERENCE_CALIB)
+    cap, cfg = _write(tmp_path, "adc_data.bin", cw.dca1000_bytes(frames), "p.cfg",
+                      cw.sdk_cfg(ORDER))
+    import_capture(cap, tmp_path / "single", config=cfg, board="AWR1843BOOST")
+    got = _open(tmp_path / "single").calib.single_chip.antenna
+    np.testing.assert_array_equal(got.tx_positions, ref.single_chip.antenna.tx_positions)
+    np.testing.assert_array_equal(got.rx_positions, ref.single_chip.antenna.rx_positions)
+    cap, cfg, _, _ = _cascade(tmp_path, nf=2)
+    import_capture(cap, tmp_path / "cascade", config=cfg)
+    got = _open(tmp_path / "cascade").calib.cascade.antenna
+    np.testing.assert_array_equal(got.tx_positions, ref.cascade.antenna.tx_positions)
+    # The data's RX channels are in device order; as a set they are ColoRadar's array.
+    np.testing.assert_array_equal(np.sort(got.rx_positions[:, 0]),
+                                  ref.cascade.antenna.rx_positions[:, 0])
+    np.testing.assert_array_equal(got.virtual.unique_positions,
+                                  ref.cascade.antenna.virtual.unique_positions)
 
 
 # ----------------------------------------------------------------------- bad captures
