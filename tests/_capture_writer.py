@@ -174,7 +174,7 @@ def packet_dump(stream: bytes, *, payload: int = 1456, drop: tuple[int, ...] = (
 
 # ------------------------------------------------------------------------------ MMWCAS
 def write_mmwcas(folder: Path, frames: np.ndarray, ticks_us: np.ndarray, *,
-                 truncate_device: str | None = None) -> None:
+                 truncate_device: str | None = None, segment: int = 0) -> None:
     """An MMWCAS capture folder: per device ``<dev>_0000_data.bin`` (per frame, loop, chirp,
     sample: the device's 4 RX as int16 I, Q) and ``<dev>_0000_idx.bin`` (24-byte header, 48-byte
     entries with the timestamp at byte 32)."""
@@ -193,9 +193,9 @@ def write_mmwcas(folder: Path, frames: np.ndarray, ticks_us: np.ndarray, *,
         per = len(data) // nf
         if dev == truncate_device:
             data = data[:-100]
-        (folder / f"{dev}_0000_data.bin").write_bytes(data)
+        (folder / f"{dev}_{segment:04d}_data.bin").write_bytes(data)
         idx = struct.pack("<IIIIQ", 0x1234, 1, 0, nf, len(data))
         for f in range(nf):
             idx += struct.pack("<HHIHH4IIQQ", 1, 1, 0, 0, 0, 0, 0, 0, 0, per,
                                int(ticks_us[f]), f * per)
-        (folder / f"{dev}_0000_idx.bin").write_bytes(idx)
+        (folder / f"{dev}_{segment:04d}_idx.bin").write_bytes(idx)

@@ -185,6 +185,21 @@ def test_mmwcas_folder_round_trips_with_rx_order_and_idx_timestamps(tmp_path):
     assert res.frames_written == 3
 
 
+def test_mmwcas_segments_are_read_in_order(tmp_path):
+    cap, cfg, fr, ticks = _cascade(tmp_path)
+    more = fr[::-1].copy()                               # a second segment, other frames
+    cw.write_mmwcas(cap, more, ticks + 150_000, segment=1)
+    (tmp_path / "cascade.json").write_text(cw.cascade_json(CASCADE_ORDER, w=CASCADE_W, frames=6))
+    res = import_capture(cap, tmp_path / "run", config=cfg, start_time=0.0)
+    assert res.frames_written == 5
+    seq = _open(tmp_path / "run")
+    want = np.concatenate([fr, more])[1:]
+    for k in range(5):
+        np.testing.assert_array_equal(seq.cascade.adc[k], want[k].astype(np.complex64))
+    all_ticks = np.concatenate([ticks, ticks + 150_000])
+    np.testing.assert_allclose(seq.cascade.adc.timestamps, (all_ticks[1:] - all_ticks[1]) * 1e-6)
+
+
 def test_mmwcas_missing_or_short_device_file_is_named(tmp_path):
     cap, cfg, _, _ = _cascade(tmp_path, truncate="slave1", nf=2)
     short = r"slave1_0000_data\.bin.*4 RX.*frame 1 \(from 0\) has 98,204 bytes, 100 bytes short"
@@ -233,12 +248,17 @@ def test_bad_captures_get_named_errors_and_leave_nothing(tmp_path, frames):
     cap, cfg = _write(tmp_path, "adc_data.bin", data, "p2.cfg", cw.sdk_cfg(ORDER, rx_mask=0x3))
     with pytest.raises(FormatError, match="disagrees with the file"):
         import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
+    # A ramp that ends before the 64 samples at 10 Msps from 6 µs do (12.4 µs).
+    cap, cfg = _write(tmp_path, "adc_data.bin", data, "p3.cfg",
+                      cw.sdk_cfg(ORDER, w=dict(cw.SMALL, ramp_end_us=10.0)))
+    with pytest.raises(FormatError, match=r"samples until 12\.4 µs .* ramp ends at 10 µs"):
+        import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
     cap, cfg = _write(tmp_path, "adc_data.bin", data, "p.cfg", cw.sdk_cfg(ORDER))
     with pytest.raises(SettingsError, match="unknown board 'AWR9999'"):
         import_capture(cap, tmp_path / "run", config=cfg, board="AWR9999")
     with pytest.raises(SettingsError, match="does not name the radar board"):
         import_capture(cap, tmp_path / "run", config=cfg)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["adc_data.bin", "p.cfg", "p2.cfg"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adc_data.bin", "p.cfg", "p2.cfg", "p3.cfg"]
     # An existing run is not replaced without --overwrite; a folder that no import wrote never.
     import_capture(cap, tmp_path / "run", config=cfg, board="AWR1843BOOST")
     with pytest.raises(OutputExistsError):

@@ -413,9 +413,12 @@ def _read_text(path: Path) -> str:
 def _setup_beside(path: Path) -> Path | None:
     """The ``*.setup.json`` mmWave Studio writes beside ``*.mmwave.json``, if there is one."""
     stem = re.sub(r"\.mmwave\.json$", "", path.name, flags=re.I)
-    cand = [path.with_name(f"{stem}.setup.json")]
-    cand += sorted(p for p in path.parent.glob("*.setup.json") if p not in cand)
-    return next((c for c in cand if c.is_file()), None)
+    same = path.with_name(f"{stem}.setup.json")
+    if same.is_file():
+        return same
+    # Otherwise only an unambiguous one: the single setup file of the folder.
+    others = sorted(path.parent.glob("*.setup.json"))
+    return others[0] if len(others) == 1 else None
 
 
 def load_config(path: str | os.PathLike[str], setup: str | os.PathLike[str] | None = None
@@ -459,3 +462,8 @@ def check_config_values(cfg: CaptureConfig) -> None:
             raise SettingsError(f"{cfg.source}: {v} {what}; a frame needs at least one")
     if not cfg.frame_period > 0:
         raise SettingsError(f"{cfg.source}: frame periodicity {cfg.frame_period!r} s; expected > 0")
+    window_end = cfg.adc_start_time + cfg.num_samples / cfg.sample_rate
+    if cfg.sample_rate > 0 and window_end > cfg.ramp_end_time * (1 + 1e-9):
+        raise FormatError(f"{cfg.source}: the ADC samples until {window_end * 1e6:.3g} µs (ADC "
+                          f"start + {cfg.num_samples} samples at {cfg.sample_rate / 1e3:g} ksps) "
+                          f"but the ramp ends at {cfg.ramp_end_time * 1e6:.3g} µs")

@@ -268,8 +268,8 @@ def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Fram
         if len(set(counts)) != 1:
             raise FormatError(f"{folder}: the devices' files hold different numbers of frames "
                               f"({', '.join(f'{dv} {c}' for dv, c in zip(DEVICES, counts, strict=True))})")
-    devs = [np.concatenate(a) if len(a) > 1 else a[0] for a in arrays]
-    total = devs[0].size // dev_fb
+    seg_frames = [a.size // dev_fb for a in arrays[0]]       # frames of each segment
+    total = sum(seg_frames)
     first = 0 if spec.keep_first_frame else 1
     if total - first <= 0:
         raise FormatError(f"{folder}: {total} frame(s); nothing left after the first, which the "
@@ -292,10 +292,15 @@ def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Fram
                  f"{cfg.frame_period * 1e3:g} ms frame period)")
 
     def blocks(block: int = 16) -> Iterator[tuple[int, np.ndarray]]:
-        for a in range(first, total, block):
-            b = min(total, a + block)
-            words = [np.frombuffer(dv[a * dev_fb:b * dev_fb], dtype="<i2") for dv in devs]
-            yield a - first, decode_tda2(words, cfg, iq)
+        # Segment by segment, straight from the memory-mapped files (no copy of the capture).
+        done = 0
+        for k, n in enumerate(seg_frames):
+            for a in range(max(first - done, 0), n, block):
+                b = min(n, a + block)
+                words = [np.frombuffer(arrays[d][k][a * dev_fb:b * dev_fb], dtype="<i2")
+                         for d in range(len(DEVICES))]
+                yield done + a - first, decode_tda2(words, cfg, iq)
+            done += n
 
     return _Frames(total - first, blocks(), times[first:], {}, notes,
                    f"TDA2, 4 devices, complex {iq.upper()}", first)
