@@ -226,8 +226,9 @@ def _dca1000_frames(path: Path, cfg: CaptureConfig, spec: CaptureImport, packets
             for f in range(a // fb, (b - 1) // fb + 1):
                 bad.setdefault(f, f"bytes {a:,}..{b - 1:,} of the stream were in dropped packets")
         if ps.missing:
-            notes.append(f"{path}: {dropped} dropped packets ({len(ps.missing)} gaps) touch "
-                         f"frames {', '.join(map(str, sorted(bad)))}")
+            notes.append(f"{path}: {dropped} dropped packet{'s' * (dropped != 1)} "
+                         f"({len(ps.missing)} gap{'s' * (len(ps.missing) != 1)}) touch frame"
+                         f"{'s' * (len(bad) != 1)} {', '.join(map(str, sorted(bad)))}")
     else:
         stream = raw
     n = _whole_frames(stream.size, fb, cfg, str(path), spec.partial_last_frame, notes)
