@@ -205,6 +205,11 @@ def test_mmwcas_missing_or_short_device_file_is_named(tmp_path):
     short = r"slave1_0000_data\.bin.*4 RX.*frame 1 \(from 0\) has 98,204 bytes, 100 bytes short"
     with pytest.raises(FormatError, match=short):
         import_capture(cap, tmp_path / "run", config=cfg)
+    (tmp_path / "half.json").write_text(cw.cascade_json(CASCADE_ORDER, w=dict(CASCADE_W, loops=4),
+                                                         frames=2))
+    with pytest.raises(FormatError, match=r"master_0000_data\.bin: .* 98,304 bytes a frame,"
+                                          r".* 49,152 bytes: the configuration disagrees"):
+        import_capture(cap, tmp_path / "run", config=tmp_path / "half.json")
     (cap / "slave2_0000_data.bin").unlink()
     with pytest.raises(MissingDataError, match=r"missing slave2_0000_data\.bin"):
         import_capture(cap, tmp_path / "run", config=cfg)

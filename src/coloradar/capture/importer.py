@@ -252,8 +252,16 @@ def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Fram
         counts = []
         for d, dev in enumerate(DEVICES):
             data, idx = seg[dev]
-            n_idx, _, ts = read_idx(idx)
+            n_idx, _, ts, _ = read_idx(idx)
             raw = _read_file(data)
+            # The index counts the frames the file holds: their common size is the frame's
+            # (the entries' own size field is not relied on: its meaning is not documented).
+            if n_idx and raw.size > n_idx * dev_fb and raw.size % n_idx == 0:
+                raise FormatError(
+                    f"{data}: {raw.size:,} bytes for the {n_idx} frames {idx.name} indexes, "
+                    f"{raw.size // n_idx:,} bytes a frame, but {cfg.source} makes a device's "
+                    f"frame {cfg.num_samples} samples x {cfg.num_loops} loops x {cfg.num_tx} TX "
+                    f"x 4 RX = {dev_fb:,} bytes: the configuration disagrees with the capture")
             # One device's share of a frame: its four RX.
             dev_cfg = replace(cfg, num_frames=0, rx_channels=cfg.rx_channels[4 * d:4 * d + 4])
             n = _whole_frames(raw.size, dev_fb, dev_cfg, str(data), spec.partial_last_frame,

@@ -75,8 +75,9 @@ def find_cascade_files(folder: Path) -> CascadeFiles:
     return CascadeFiles(folder, tuple(segments))
 
 
-def read_idx(path: Path) -> tuple[int, int, np.ndarray]:
-    """``numIdx``, ``dataFileSize`` and the uint64 timestamps of an ``_idx.bin``.
+def read_idx(path: Path) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """``numIdx``, ``dataFileSize``, the uint64 timestamps and the uint32 byte sizes of the
+    frames of an ``_idx.bin``.
 
     Raises
     ------
@@ -95,7 +96,8 @@ def read_idx(path: Path) -> tuple[int, int, np.ndarray]:
         raise FormatError(f"{path}: the header says {n} frames but the index holds {have} "
                           f"entries of {IDX_ENTRY.itemsize} bytes")
     entries = np.frombuffer(body[:n * IDX_ENTRY.itemsize], dtype=IDX_ENTRY)
-    return n, int(head["dataFileSize"]), entries["timestamp"].astype(np.uint64)
+    return (n, int(head["dataFileSize"]), entries["timestamp"].astype(np.uint64),
+            entries["size"].astype(np.int64))
 
 
 def timestamp_unit(ticks: np.ndarray, frame_period: float) -> float:
