@@ -8,7 +8,13 @@ them back.
 """
 
 from .antenna import AntennaConfig, VirtualArray, format_antenna_cfg, parse_antenna_cfg
-from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib
+from .coupling import (
+    CouplingCalib,
+    format_coupling_calib,
+    parse_coupling_calib,
+    read_coupling_calib,
+    write_coupling_calib,
+)
 from .heatmap_grid import HeatmapConfig, format_heatmap_cfg, parse_heatmap_cfg, shipped_angle_bins
 from .phase_frequency import (
     PhaseFrequencyCalib,
@@ -51,6 +57,8 @@ __all__ = [
     "parse_waveform_cfg",
     "preset_calibration",
     "preset_radar",
+    "read_coupling_calib",
     "shipped_angle_bins",
     "write_calibration",
+    "write_coupling_calib",
 ]
