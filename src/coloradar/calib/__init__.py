@@ -23,7 +23,7 @@ from .phase_frequency import (
 )
 from .presets import PRESET_TRANSFORMS, preset_calibration, preset_radar
 from .rig import RADARS, SENSORS, Calibration, RadarCalib
-from .sensor import load_calibration, load_radar_calib, write_calibration
+from .sensor import load_calibration, load_radar_calib, with_coupling, write_calibration
 from .transforms import Extrinsic, format_transform, parse_transform
 from .waveform import SPEED_OF_LIGHT, WaveformConfig, format_waveform_cfg, parse_waveform_cfg
 
@@ -59,6 +59,7 @@ __all__ = [
     "preset_radar",
     "read_coupling_calib",
     "shipped_angle_bins",
+    "with_coupling",
     "write_calibration",
     "write_coupling_calib",
 ]

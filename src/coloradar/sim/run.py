@@ -58,7 +58,7 @@ from ..calib import (
     format_transform,
     format_waveform_cfg,
     preset_radar,
-    read_coupling_calib,
+    with_coupling,
     write_calibration,
 )
 from ..errors import ColoradarError, FormatError, MissingDataError, OutputExistsError
@@ -221,18 +221,13 @@ def _with_coupling_calib(calib: Calibration, coupling_adc: dict[str, np.ndarray]
     calibration, and its frames the file's coupling (:func:`.radar.planted_coupling`)."""
     if given is None:
         return calib, coupling_adc
-    c = given if isinstance(given, CouplingCalib) else read_coupling_calib(given)
-    where = "coupling_calib" if isinstance(given, CouplingCalib) else str(given)
+    new = with_coupling(calib, given)
+    adc = dict(coupling_adc)
     for name in RADARS:
-        rc = calib.radar(name)
-        if (c.num_tx, c.num_rx) == (rc.waveform.num_tx, rc.waveform.num_rx):
-            adc = dict(coupling_adc)
-            adc[name] = planted_coupling(rc, c, coupling_adc[name])
-            radars = {r: calib.radar(r) for r in RADARS} | {name: replace(rc, coupling=c)}
-            return replace(calib, cascade=radars["cascade"],
-                           single_chip=radars["single_chip"]), adc
-    raise ColoradarError(f"{where}: a {c.num_tx} TX x {c.num_rx} RX coupling calibration fits "
-                         "neither radar (cascade 12 x 16, single chip 3 x 4)")
+        c = new.radar(name).coupling
+        if c is not calib.radar(name).coupling and c is not None:
+            adc[name] = planted_coupling(new.radar(name), c, coupling_adc[name])
+    return new, adc
 
 
 def _calib_texts(calib: Calibration, layout: RunLayout = COLORADAR) -> dict[str, str]:
