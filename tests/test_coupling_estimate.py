@@ -20,7 +20,7 @@ from coloradar.calib import (
     write_coupling_calib,
 )
 from coloradar.cli.calibrate import coupling_calibration
-from coloradar.cli.main import main
+from coloradar.cli.main import build_parser, main
 from coloradar.dsp import RadarProcessor
 from coloradar.dsp.coupling_estimate import estimate_coupling
 from coloradar.errors import CalibrationError, CalibrationWarning, ColoradarError, OutputExistsError
@@ -219,5 +219,8 @@ def test_calibrate_command_writes_outside_the_dataset_only(released_run, tmp_pat
         cal = coupling_calibration(res.run_path, None, target)
     np.testing.assert_array_equal(cal.single_chip.coupling.data, est.data)
     assert cal.single_chip.coupling.missing_tx == ()
+    args = build_parser().parse_args(["process", str(res.run_path), "--out", "o",
+                                      "--coupling", str(target)])
+    assert args.coupling == str(target)
     with pytest.raises(ColoradarError):
         coupling_calibration(res.run_path, None, tmp_path / "missing.txt")
