@@ -4,6 +4,7 @@ simulator's planted coupling (issue 28; docs/calibration.md)."""
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from dataclasses import replace
 
@@ -172,8 +173,9 @@ def released_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("cpl")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CalibrationWarning)
-        res = simulate_run(out / "data", scene="corridor", duration=2.0, seed=3,
-                           sensors=["single_chip"], heatmaps=False, coupling_calib=RELEASED)
+        res = simulate_run(out / "data", scene="corridor", duration=2.5, seed=3,
+                           sensors=["single_chip", "groundtruth"], heatmaps=False,
+                           coupling_calib=RELEASED, rest=1.0)
     return out, res
 
 
@@ -188,11 +190,12 @@ def test_simulator_carries_the_released_file_and_plants_coupling_on_every_tx(rel
     planted = load_truth(res.run_path)["single_chip/coupling"]            # (tx, rx, Ns)
     np.testing.assert_allclose(planted[:2, :, :64], rel.data[:2], rtol=1e-4, atol=0.05)
     assert np.abs(planted[2, :, :4]).min() > 100                         # TX 2 has leakage
-    # The frames carry it: their chirp mean's FFT is the planted coupling (+ scene, noise).
+    # The frames carry it: the chirp mean's FFT of a frame taken on the move is the planted
+    # coupling (+ what of the scene is at zero Doppler, and noise).
     from coloradar.dataset import open_sequence
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CalibrationWarning)
-        adc = open_sequence(res.run_path).single_chip.adc[0]
+        adc = open_sequence(res.run_path).single_chip.adc[-1]          # the rig moving
     mean = np.fft.fft(adc.astype(np.complex128).mean(axis=2), axis=-1)
     assert _rel_error(mean[..., :3], planted[..., :3]).max() < 0.05
 
@@ -202,11 +205,22 @@ def test_calibrate_command_writes_outside_the_dataset_only(released_run, tmp_pat
     target = tmp_path / "estimated.txt"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", CalibrationWarning)
-        assert main(["calibrate", "coupling", str(res.run_path), "--out", str(target),
-                     "--quiet"]) == 0
+        assert main(["calibrate", "coupling", str(res.run_path), "--out", str(target)]) == 0
+        # The rig stands still for the first second (by the ground truth): those frames are
+        # left out.
+        said = re.search(r"from (\d+) of (\d+) frames .*\((\d+) left out: slower than 0\.1 m/s\)",
+                         capsys.readouterr().out)
+        assert said is not None
+        used, total, still = map(int, said.groups())
+        assert used + still == total and still >= 10                   # 1 s at 10 Hz, then easing
         est = read_coupling_calib(target)
         truth = load_truth(res.run_path)["single_chip/coupling"][..., :64]
-        assert _rel_error(est.data, truth).max() < 0.05                  # 2 s of motion
+        assert _rel_error(est.data, truth).max() < 0.05                  # 1.5 s of motion
+        # Every frame, the still ones too: the corridor's static walls are taken for coupling.
+        every = tmp_path / "every_frame.txt"
+        assert main(["calibrate", "coupling", str(res.run_path), "--out", str(every),
+                     "--min-speed", "0", "--quiet"]) == 0
+        assert _rel_error(read_coupling_calib(every).data, truth).max() > 0.5
         assert main(["calibrate", "coupling", str(res.run_path), "--out", str(target)]) == 1
         assert "exists" in capsys.readouterr().err
         for inside in (res.run_path / "c.txt", res.calib_path / "single_chip" / "c.txt",

@@ -14,8 +14,15 @@ from ..calib import Calibration, load_calibration, with_coupling, write_coupling
 from ..dataset import open_dataset, open_sequence
 from ..errors import ColoradarError, DataWarning, MissingDataError
 from ..formats.source import check_input_path
+from ..geometry import rig_velocity, trajectory_from_groundtruth
 from ..progress import Progress
-from ._common import add_file_output_args, add_quiet_arg, new_output_file, positive_int
+from ._common import (
+    add_file_output_args,
+    add_quiet_arg,
+    new_output_file,
+    non_negative_float,
+    positive_int,
+)
 
 FEW_FRAMES = 20
 """Below this many frames the static scene can hardly be told from the coupling: said."""
@@ -46,6 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "targets)")
     c.add_argument("--max-frames", type=positive_int, default=600, metavar="N",
                    help="use at most N frames, spread evenly over the run (default 600)")
+    c.add_argument("--min-speed", type=non_negative_float, default=0.1, metavar="M_PER_S",
+                   help="leave out frames in which the radar moves slower than this by the "
+                        "run's ground truth: a scene that stands still looks like coupling "
+                        "(default 0.1 m/s; 0: every frame)")
     add_file_output_args(c)
     add_quiet_arg(c)
     c.set_defaults(func=run)
@@ -71,6 +82,27 @@ def check_outside_dataset(out: Path, run: str | os.PathLike[str], calib_source: 
                                  "writes into a dataset: choose a file outside it")
 
 
+def moving_frames(seq, radar: str, times: np.ndarray, min_speed: float) -> np.ndarray:
+    """bool ``(N,)``: frames at ``times`` in which the radar's origin moves at least
+    ``min_speed`` [m/s] by the run's ground truth (all True with ``min_speed`` 0, or with a
+    warning when the run has no ground truth)."""
+    t = np.asarray(times, dtype=np.float64)
+    if min_speed <= 0:
+        return np.ones(t.size, dtype=bool)
+    try:
+        traj = trajectory_from_groundtruth(seq)
+    except MissingDataError:
+        warnings.warn(f"{seq.name}: no ground truth: every frame is used, whether the rig moves "
+                      "or not", DataWarning, stacklevel=2)
+        return np.ones(t.size, dtype=bool)
+    ok = traj.covers(t)
+    speed = np.zeros(t.size)
+    if ok.any():
+        v = rig_velocity(traj, t[ok], calib=seq.calib, sensor=radar)
+        speed[ok] = np.linalg.norm(v.linear, axis=1)
+    return speed >= min_speed
+
+
 def _frames(stream, positions: list[int]):
     for k in positions:
         frame = stream.read_or_skip(k)
@@ -90,7 +122,13 @@ def run(args: argparse.Namespace) -> int:
     n = len(stream)
     if n == 0:
         raise MissingDataError(f"{args.run}: no {args.radar} ADC frames")
-    positions = sorted(set(np.linspace(0, n - 1, min(n, args.max_frames)).round().astype(int)))
+    moving = np.flatnonzero(moving_frames(seq, args.radar, stream.timestamps, args.min_speed))
+    if moving.size == 0:
+        raise MissingDataError(f"{seq.name}: the radar moves slower than {args.min_speed:g} m/s "
+                               "in every frame (by the ground truth); the coupling cannot be "
+                               "told from the scene (lower --min-speed to use them anyway)")
+    pick = np.linspace(0, moving.size - 1, min(moving.size, args.max_frames)).round()
+    positions = [int(k) for k in moving[np.unique(pick.astype(int))]]
     prog = Progress(len(positions), f"{args.radar} coupling", enabled=not args.quiet)
     with prog:
         est = estimate_coupling(_frames(stream, positions), rc, statistic=args.statistic,
@@ -100,7 +138,10 @@ def run(args: argparse.Namespace) -> int:
                       "returns can hardly be told from the coupling", DataWarning, stacklevel=2)
     write_coupling_calib(out, est.coupling, overwrite=args.overwrite)
     if not args.quiet:
-        print(f"{out}: {args.radar} coupling from {est.frames} of {n} frames of {seq.name}")
+        still = f" ({n - moving.size} left out: slower than {args.min_speed:g} m/s)" \
+            if moving.size < n else ""
+        print(f"{out}: {args.radar} coupling from {est.frames} of {n} frames of {seq.name}"
+              f"{still}")
         for line in summary(est.coupling.data, est.standard_error, rc.coupling):
             print(line)
     return 0
