@@ -8,7 +8,13 @@ them back.
 """
 
 from .antenna import AntennaConfig, VirtualArray, format_antenna_cfg, parse_antenna_cfg
-from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib
+from .coupling import (
+    CouplingCalib,
+    format_coupling_calib,
+    parse_coupling_calib,
+    read_coupling_calib,
+    write_coupling_calib,
+)
 from .heatmap_grid import HeatmapConfig, format_heatmap_cfg, parse_heatmap_cfg, shipped_angle_bins
 from .phase_frequency import (
     PhaseFrequencyCalib,
@@ -17,7 +23,7 @@ from .phase_frequency import (
 )
 from .presets import PRESET_TRANSFORMS, preset_calibration, preset_radar
 from .rig import RADARS, SENSORS, Calibration, RadarCalib
-from .sensor import load_calibration, load_radar_calib, write_calibration
+from .sensor import load_calibration, load_radar_calib, with_coupling, write_calibration
 from .transforms import Extrinsic, format_transform, parse_transform
 from .waveform import SPEED_OF_LIGHT, WaveformConfig, format_waveform_cfg, parse_waveform_cfg
 
@@ -51,6 +57,9 @@ __all__ = [
     "parse_waveform_cfg",
     "preset_calibration",
     "preset_radar",
+    "read_coupling_calib",
     "shipped_angle_bins",
+    "with_coupling",
     "write_calibration",
+    "write_coupling_calib",
 ]

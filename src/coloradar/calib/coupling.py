@@ -6,15 +6,19 @@ and near-field coupling that every frame carries. It is subtracted in the range-
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CalibrationError, CalibrationWarning
+from ..formats.atomic import atomic_write_text, new_output_path
+from ..formats.source import read_file_text
 from ._parse import check_finite, get_number, key_values, readonly
 
-__all__ = ["CouplingCalib", "format_coupling_calib", "parse_coupling_calib"]
+__all__ = ["CouplingCalib", "format_coupling_calib", "parse_coupling_calib", "read_coupling_calib",
+           "write_coupling_calib"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,3 +104,24 @@ def format_coupling_calib(c: CouplingCalib) -> str:
     return (f"num_tx:{c.num_tx}\nnum_rx:{c.num_rx}\nnum_range_bins:{c.num_range_bins}\n"
             f"num_doppler_bins:{c.num_doppler_bins}\n"
             "data:" + ",".join(f"{v:g}" for v in inter) + "\n")
+
+
+def read_coupling_calib(path: str | os.PathLike[str]) -> CouplingCalib:
+    """Read a ``coupling_calib.txt`` file (the release's, or one written by
+    :func:`write_coupling_calib`); errors name the file."""
+    return parse_coupling_calib(read_file_text(path), str(path))
+
+
+def write_coupling_calib(path: str | os.PathLike[str], c: CouplingCalib,
+                         overwrite: bool = False) -> None:
+    """Write ``c`` as a ``coupling_calib.txt`` file, atomically (whole or not at all).
+
+    The text is the release's format (:func:`format_coupling_calib`: ``%g`` values, six
+    significant digits, as the released files hold them).
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists and ``overwrite`` is not set.
+    """
+    atomic_write_text(new_output_path(path, overwrite), format_coupling_calib(c))

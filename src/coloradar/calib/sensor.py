@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 from ..errors import CalibrationError, CalibrationWarning, ColoradarError
@@ -17,7 +18,7 @@ from ..formats.atomic import atomic_write_text
 from ..formats.layout import RunLayout, get_layout
 from ..formats.source import Source, open_source
 from .antenna import format_antenna_cfg, parse_antenna_cfg
-from .coupling import format_coupling_calib, parse_coupling_calib
+from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib, read_coupling_calib
 from .heatmap_grid import format_heatmap_cfg, parse_heatmap_cfg
 from .phase_frequency import (
     format_phase_frequency_calib,
@@ -34,6 +35,7 @@ __all__ = [
     "RadarCalib",
     "load_calibration",
     "load_radar_calib",
+    "with_coupling",
     "write_calibration",
 ]
 
@@ -170,3 +172,39 @@ def write_calibration(calib: Calibration, folder: str | os.PathLike[str], *,
             fname = lay.transforms.get(sensor, f"base_to_{sensor}.txt")
             atomic_write_text(root / "transforms" / fname, format_transform(ext))
     return root
+
+
+def with_coupling(calib: Calibration, coupling: CouplingCalib | str | os.PathLike[str],
+                  radar: str | None = None) -> Calibration:
+    """``calib`` with one radar's coupling calibration replaced (by an estimated
+    ``coupling_calib.txt``, say: ``coloradar calibrate coupling``).
+
+    Parameters
+    ----------
+    calib
+        The rig calibration.
+    coupling
+        A :class:`CouplingCalib` or the path of a ``coupling_calib.txt``.
+    radar
+        ``"cascade"`` or ``"single_chip"``; None: the radar whose ``(tx, rx)`` the file has.
+
+    Raises
+    ------
+    CalibrationError
+        The file fits neither radar, or not the one named (its size says which it is).
+    """
+    c = coupling if isinstance(coupling, CouplingCalib) else read_coupling_calib(coupling)
+    where = "the coupling calibration" if isinstance(coupling, CouplingCalib) else str(coupling)
+    fits = [r for r in RADARS
+            if (c.num_tx, c.num_rx) == (calib.radar(r).waveform.num_tx,
+                                        calib.radar(r).waveform.num_rx)]
+    name = radar if radar is not None else (fits[0] if fits else None)
+    if name is None or name not in fits:
+        sizes = ", ".join(f"{r} {calib.radar(r).waveform.num_tx} x "
+                          f"{calib.radar(r).waveform.num_rx}" for r in RADARS)
+        raise CalibrationError(f"{where}: a {c.num_tx} TX x {c.num_rx} RX coupling calibration "
+                               f"does not fit {'the ' + radar if radar else 'either'} radar "
+                               f"({sizes})")
+    radars = {r: calib.radar(r) for r in RADARS}
+    radars[name] = replace(radars[name], coupling=c)    # RadarCalib checks its range bins
+    return replace(calib, cascade=radars["cascade"], single_chip=radars["single_chip"])

@@ -12,6 +12,7 @@ from ..batch.output_folder import PRODUCTS
 from ..dsp import ProcessingSettings
 from ..formats.source import check_input_path
 from ._common import UsageError, add_executor_args, executor_from_args, positive_int, processing_setting
+from .calibrate import coupling_calibration
 
 
 def _frames(text: str) -> slice:
@@ -63,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "e.g. '*hallways*' (default: every run)")
     p.add_argument("--calib", metavar="DIR",
                    help="calib folder or calib.zip (default: found beside each run)")
+    p.add_argument("--coupling", metavar="FILE",
+                   help="a coupling_calib.txt to subtract instead of the calibration's, for the "
+                        "radar of its size (as 'coloradar calibrate coupling' writes it)")
     p.add_argument("--radar", choices=("cascade", "single_chip", "all"), default="all",
                    help="radar to process (default: every radar with ADC frames)")
     p.add_argument("--products", type=_products, default=PRODUCTS,
@@ -93,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--set: {exc}") from None
     check_input_path(args.path, "a run folder, a run .zip or a dataset root folder")
     try:
-        report = process(args.path, args.out, runs=args.runs, calib=args.calib,
+        calib = coupling_calibration(args.path, args.calib, args.coupling) if args.coupling else args.calib
+        report = process(args.path, args.out, runs=args.runs, calib=calib,
                          radars=args.radar, products=args.products, frames=args.frames,
                          overwrite=args.overwrite, settings=settings, executor=executor,
                          jobs=args.jobs, chunk_size=args.chunk_size, progress=not args.quiet)

@@ -26,6 +26,7 @@ from .frames import (
 )
 from .mapping import (
     MAP_SOURCES,
+    MapSettings,
     PointMap,
     VoxelAccumulator,
     accumulate_clouds,
@@ -41,6 +42,7 @@ __all__ = [
     "MAP_SOURCES",
     "SE3",
     "ExtrapolationError",
+    "MapSettings",
     "PointMap",
     "RigVelocity",
     "Trajectory",

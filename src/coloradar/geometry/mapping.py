@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -14,8 +15,8 @@ from .se3 import SE3
 from .timesync import window_indices
 from .trajectory import Trajectory, trajectory_from_groundtruth
 
-__all__ = ["MAP_SOURCES", "PointMap", "VoxelAccumulator", "accumulate_clouds", "build_map",
-           "voxel_downsample"]
+__all__ = ["MAP_SOURCES", "MapSettings", "PointMap", "VoxelAccumulator", "accumulate_clouds",
+           "build_map", "voxel_downsample"]
 
 MAP_SOURCES = {s.sensor: s.name for lay in LAYOUTS.values() for s in lay.frames.values()
                if s.kind in ("lidar_points", "radar_points")}
@@ -256,11 +257,23 @@ class PointMap:
     points_from: str = "pointclouds"
 
 
-def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float | None = None,
-              voxel_size: float | None = None, stride: int = 1, max_range: float | None = None,
-              min_range: float = 0.0, trajectory: Trajectory | None = None,
-              progress: Callable[[int, int], None] | None = None,
-              processing: dict | None = None) -> PointMap:
+@dataclass(frozen=True)
+class MapSettings:
+    """What part of a run :func:`build_map` accumulates, and how (each field is also one of its
+    keywords, documented there)."""
+
+    start: float = 0.0
+    duration: float | None = None
+    voxel_size: float | None = None
+    stride: int = 1
+    max_range: float | None = None
+    min_range: float = 0.0
+    processing: Mapping[str, Any] | None = None
+
+
+def build_map(seq, sensor: str = "lidar", settings: MapSettings | None = None, *,
+              trajectory: Trajectory | None = None,
+              progress: Callable[[int, int], None] | None = None, **fields: Any) -> PointMap:
     """Accumulate a run's point clouds into a world-frame map.
 
     Parameters
@@ -272,6 +285,16 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
         stream when the sequence has one (the single chip's own, or those of
         ``open_sequence(run, products=OUT)``), else computed from its ADC frames with
         :class:`coloradar.dsp.RadarProcessor` (as ``coloradar odometry`` and ``export`` do).
+    settings
+        A :class:`MapSettings` (its fields are listed below); keyword arguments named like its
+        fields replace them, so ``build_map(seq, "lidar", start=1.0, voxel_size=0.1)`` works.
+    trajectory
+        ``world_T_base(t)``; default: the run's ground truth.
+    progress
+        Called as ``progress(done, total)`` after each frame.
+
+    Other Parameters
+    ----------------
     start, duration
         Window in seconds from the start of the ground truth; None duration = to the end.
         Frames outside the ground truth's span are left out.
@@ -281,14 +304,12 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
         Use every ``stride``-th frame of the window.
     max_range, min_range
         Range gate per point, in the sensor frame [m].
-    trajectory
-        ``world_T_base(t)``; default: the run's ground truth.
-    progress
-        Called as ``progress(done, total)`` after each frame.
     processing
         Keyword arguments of :class:`coloradar.dsp.RadarProcessor` when the points are
         computed from ADC frames.
     """
+    opts = replace(settings or MapSettings(), **fields)
+    start, duration, stride = opts.start, opts.duration, opts.stride
     if sensor not in MAP_SOURCES:
         raise MissingDataError(f"no point clouds for {sensor!r}; expected one of "
                                f"{', '.join(MAP_SOURCES)}")
@@ -299,7 +320,7 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
     if name not in have and sensor != "lidar" and f"{sensor}/adc" in have:
         from ..dsp import RadarProcessor  # only for a radar without point clouds
 
-        proc = RadarProcessor(seq.calib.radar(sensor), **dict(processing or {}))
+        proc = RadarProcessor(seq.calib.radar(sensor), **dict(opts.processing or {}))
         convert, name, points_from = proc.pointcloud, f"{sensor}/adc", "adc"
     if name not in have:
         hint = (" (radar point clouds that coloradar process wrote are read with "
@@ -337,7 +358,7 @@ def build_map(seq, sensor: str = "lidar", *, start: float = 0.0, duration: float
             if progress is not None:
                 progress(k + 1, idx.size)
 
-    pts = accumulate_clouds(clouds(), world, voxel_size, max_range, min_range)
+    pts = accumulate_clouds(clouds(), world, opts.voxel_size, opts.max_range, opts.min_range)
     from .cloud_io import default_fields
 
     return PointMap(pts, default_fields(pts.shape[1]), sensor, idx[used], ts[idx[used]],

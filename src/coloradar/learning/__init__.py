@@ -25,7 +25,7 @@ from .metrics import (
     occupancy_scores,
     score_clouds,
 )
-from .samples import PRODUCTS, SyncedSamples, ViewOptions
+from .samples import PRODUCTS, SampleOptions, SyncedSamples, ViewOptions
 from .scoring import ScoreReport, score_folder
 from .splits import named_split, named_splits, split_runs
 from .targets import MapCut, TargetSettings, VoxelMap, build_voxel_map, frame_target, prepare_cut
@@ -51,6 +51,7 @@ __all__ = [
     "BevProjector",
     "CloudScores",
     "MapCut",
+    "SampleOptions",
     "ScoreReport",
     "SyncedSamples",
     "TargetSettings",

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -61,7 +61,7 @@ from .splits import split_runs
 from .targets import TargetSettings, build_voxel_map, frame_target, prepare_cut
 from .views import BevGrid, BevProjector, ViewOptions, lidar_bev, lidar_polar, radar_polar
 
-__all__ = ["PRODUCTS", "SyncedSamples", "ViewOptions"]
+__all__ = ["PRODUCTS", "SampleOptions", "SyncedSamples", "ViewOptions"]
 
 PRODUCTS = ("heatmap", "points", "polar", "bev")
 _FROM_HEATMAP = ("heatmap", "polar", "bev")
@@ -133,6 +133,23 @@ class _FolderRun:
         return state
 
 
+@dataclass(frozen=True)
+class SampleOptions:
+    """What a :class:`SyncedSamples` view holds and how it pairs frames (each field is also one
+    of its keywords, documented there; None: the default, or for an exported file what it
+    holds)."""
+
+    radar: str | None = None
+    products: Iterable[str] | None = None
+    lidar: bool | None = None
+    targets: bool | None = None
+    target_settings: TargetSettings | None = None
+    views: ViewOptions | None = None
+    pose_source: str = "groundtruth"
+    lidar_tolerance: float | None = None
+    points_tolerance: float | None = None
+
+
 class SyncedSamples:
     """Time-synchronised radar / lidar / ground-truth samples of one or more runs (map-style).
 
@@ -142,6 +159,16 @@ class SyncedSamples:
         A run (:class:`~coloradar.Sequence` or path), a dataset (:class:`~coloradar.Dataset`
         or root path), a file written by ``coloradar export ... --format hdf5`` (``.h5``), or a
         list of runs or such files.
+    options
+        A :class:`SampleOptions` (its fields are listed below); keyword arguments named like
+        its fields replace them, so ``SyncedSamples(root, radar="cascade")`` works.
+    runs
+        Only these run names (in this order).
+    calib
+        Calibration for paths (default: found beside the runs).
+
+    Other Parameters
+    ----------------
     radar
         ``"cascade"`` or ``"single_chip"``: its frames define the samples.
     products
@@ -162,10 +189,6 @@ class SyncedSamples:
         How images are made (:class:`ViewOptions`).
     pose_source
         ``"groundtruth"`` or ``"vicon"``.
-    runs
-        Only these run names (in this order).
-    calib
-        Calibration for paths (default: found beside the runs).
     lidar_tolerance, points_tolerance
         Largest time difference of a pair [s]; default half the partner stream's period.
 
@@ -181,13 +204,12 @@ class SyncedSamples:
         The first run's heatmap grid used for images and targets (None without heatmaps).
     """
 
-    def __init__(self, source: Any, *, radar: str | None = None,
-                 products: Iterable[str] | None = None, lidar: bool | None = None,
-                 targets: bool | None = None, target_settings: TargetSettings | None = None,
-                 views: ViewOptions | None = None, pose_source: str = "groundtruth",
+    def __init__(self, source: Any, options: SampleOptions | None = None, *,
                  runs: Iterable[str] | None = None,
-                 calib: Calibration | str | os.PathLike[str] | None = None,
-                 lidar_tolerance: float | None = None, points_tolerance: float | None = None):
+                 calib: Calibration | str | os.PathLike[str] | None = None, **fields: Any):
+        o = replace(options or SampleOptions(), **fields)
+        radar, products, lidar, targets = o.radar, o.products, o.lidar, o.targets
+        target_settings, views = o.target_settings, o.views
         items = _sequences(source, calib) if source is not None else []
         files = [s for s in items if not isinstance(s, Sequence)]
         if files and len(files) != len(items):
@@ -219,7 +241,7 @@ class SyncedSamples:
         self.targets = bool(targets)
         self.target_settings = target_settings or TargetSettings()
         self.views = views or ViewOptions()
-        self.pose_source = pose_source
+        self.pose_source = o.pose_source
         if runs is not None:
             # Select before indexing: the other runs may lack what this view needs.
             wanted = list(runs)
@@ -233,7 +255,8 @@ class SyncedSamples:
             else:
                 items = [have[r] for r in wanted]
         if not files:
-            self._runs = [self._index_run(s, lidar_tolerance, points_tolerance) for s in items]
+            self._runs = [self._index_run(s, o.lidar_tolerance, o.points_tolerance)
+                          for s in items]
         if not self._runs and source is not None:
             raise MissingDataError(f"{source}: no runs")
         self.runs = [r.name for r in self._runs]

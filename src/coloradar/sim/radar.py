@@ -43,6 +43,7 @@ __all__ = [
     "make_channel_errors",
     "make_coupling",
     "onboard_pointcloud",
+    "planted_coupling",
     "radar_frame",
     "tx_gains",
     "visible_targets",
@@ -267,6 +268,32 @@ def make_coupling(calib: RadarCalib, model: RadarModel,
     adc = (amp @ paths).astype(np.complex64)                                       # (tx, rx, Ns)
     spectrum = scipy.fft.fft(adc.astype(np.complex128), axis=-1)[..., :calib.heatmap.num_range_bins]
     return adc, CouplingCalib(spectrum.astype(np.complex64), w.num_chirps)
+
+
+def planted_coupling(calib: RadarCalib, coupling: CouplingCalib,
+                     own_adc: np.ndarray) -> np.ndarray:
+    """The leakage term of a radar whose calibration carries ``coupling`` (a released file, say)
+    instead of the simulator's own.
+
+    For each TX that ``coupling`` holds, the signal whose unwindowed, unnormalised FFT equals
+    the file's bins ``0 … K−1`` (and zero on the others); for each TX whose block is all zeros
+    (``coupling.missing_tx``: the released single chip's TX 2), ``own_adc``, the simulator's own
+    leakage. The frames then carry coupling on every TX, and the calibration says only what the
+    file says.
+
+    Returns
+    -------
+    numpy.ndarray
+        complex64 ``(tx, rx, sample)`` [counts], added to every chirp.
+    """
+    ns = calib.waveform.num_samples
+    k = min(coupling.num_range_bins, ns)
+    spec = np.zeros((coupling.num_tx, coupling.num_rx, ns), dtype=np.complex128)
+    spec[..., :k] = coupling.data[..., :k]
+    adc = np.fft.ifft(spec, axis=-1).astype(np.complex64)
+    for t in coupling.missing_tx:
+        adc[t] = own_adc[t]
+    return adc
 
 
 def radar_frame(calib: RadarCalib, model: RadarModel, targets: RadarTargets, *,

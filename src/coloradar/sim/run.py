@@ -49,6 +49,7 @@ from ..calib import (
     PRESET_TRANSFORMS,
     RADARS,
     Calibration,
+    CouplingCalib,
     RadarCalib,
     format_antenna_cfg,
     format_coupling_calib,
@@ -57,6 +58,7 @@ from ..calib import (
     format_transform,
     format_waveform_cfg,
     preset_radar,
+    with_coupling,
     write_calibration,
 )
 from ..errors import ColoradarError, FormatError, MissingDataError, OutputExistsError
@@ -81,6 +83,7 @@ from .radar import (
     make_channel_errors,
     make_coupling,
     onboard_pointcloud,
+    planted_coupling,
     radar_frame,
     visible_targets,
 )
@@ -209,6 +212,22 @@ def simulated_calibration(board_seed: int = 2021, true_angles: bool = True
     calib = Calibration(radars["cascade"], radars["single_chip"], dict(PRESET_TRANSFORMS),
                         "simulated")
     return calib, coupling_adc
+
+
+def _with_coupling_calib(calib: Calibration, coupling_adc: dict[str, np.ndarray],
+                         given: str | os.PathLike[str] | CouplingCalib | None
+                         ) -> tuple[Calibration, dict[str, np.ndarray]]:
+    """``SimulationSpec.coupling_calib``: the radar of the file's ``(tx, rx)`` gets it in its
+    calibration, and its frames the file's coupling (:func:`.radar.planted_coupling`)."""
+    if given is None:
+        return calib, coupling_adc
+    new = with_coupling(calib, given)
+    adc = dict(coupling_adc)
+    for name in RADARS:
+        c = new.radar(name).coupling
+        if c is not calib.radar(name).coupling and c is not None:
+            adc[name] = planted_coupling(new.radar(name), c, coupling_adc[name])
+    return new, adc
 
 
 def _calib_texts(calib: Calibration, layout: RunLayout = COLORADAR) -> dict[str, str]:
@@ -380,7 +399,8 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
         write_timestamps(ctx.root / streams["pointclouds"].timestamps_path, stamps)
     out: dict[str, np.ndarray] = {f"{radar}/timestamps": stamps, f"{radar}/world_T_radar": world_T,
            f"{radar}/velocity": vel, f"{radar}/angular_velocity": ang,
-           f"{radar}/offsets": np.asarray(offsets, dtype=np.int64)}
+           f"{radar}/offsets": np.asarray(offsets, dtype=np.int64),
+           f"{radar}/coupling": np.fft.fft(ctx.coupling_adc[radar], axis=-1).astype(np.complex64)}
     for k, parts in acc.items():
         empty = np.zeros((0, 3) if k in ("position", "velocity") else 0,
                          dtype=np.int64 if k == "ident" else np.float32)
@@ -437,6 +457,7 @@ class SimulationSpec:
     imu: ImuModel | None = None
     rest: float = 0.0
     radar_time_offset: float = 0.0
+    coupling_calib: str | os.PathLike[str] | CouplingCalib | None = None
 
 
 def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None, *,
@@ -500,6 +521,13 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
         ``t_d`` [s]: both radars' timestamps lag the true frame times, ``stamp = t − t_d``
         (an estimator must read a radar frame stamped ``t`` as the motion at ``t + t_d`` of
         the IMU and ground-truth clock). Recorded in the truth as ``radar_time_offset``.
+    coupling_calib
+        A ``coupling_calib.txt`` (path, or a :class:`~coloradar.calib.CouplingCalib`) that the
+        calibration of the radar of its size carries instead of the simulator's own: the
+        released single-chip file, say. The frames carry its coupling on every TX it holds and
+        the simulator's own leakage on a TX whose block is all zeros (the release's TX 2), so
+        that they have coupling on every TX whatever the file lacks. The truth holds what the
+        frames carry (``<radar>/coupling``).
 
     Returns
     -------
@@ -516,7 +544,8 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
     final = runs / name
     _check_target(final, overwrite)
     want_heatmaps = spec.heatmaps is not False and any(r in sensors for r in RADARS)
-    calib, coupling_adc = simulated_calibration(spec.board_seed)
+    calib, coupling_adc = _with_coupling_calib(*simulated_calibration(spec.board_seed),
+                                               spec.coupling_calib)
     has_proc = want_heatmaps and heatmap_processor(calib.cascade) is not None
     if spec.heatmaps and want_heatmaps and not has_proc:
         raise ColoradarError("heatmaps were asked for but coloradar.dsp (RadarProcessor."
@@ -539,6 +568,7 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
             scene=sc.name, duration=spec.duration, seed=spec.seed, motion=spec.motion,
             speed=spec.speed, rest=float(spec.rest),
             radar_time_offset=float(spec.radar_time_offset),
+            coupling_calib=_coupling_record(spec.coupling_calib),
             imu_model=asdict(imu_model), sensors=list(sensors),
             vicon=spec.vicon, heatmaps=has_proc, start_time=spec.start_time, name=name,
             board_seed=spec.board_seed, coloradar_version=__version__, counts=counts,
@@ -548,6 +578,13 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
         raise
     _move_into_place(partial, final)
     return SimResult(final, out / "calib", counts, time.perf_counter() - t0, has_proc, sc.name)
+
+
+def _coupling_record(given: str | os.PathLike[str] | CouplingCalib | None) -> str | None:
+    """What ``sim_config.json`` says of ``SimulationSpec.coupling_calib``."""
+    if given is None or isinstance(given, CouplingCalib):
+        return None if given is None else "CouplingCalib given"
+    return os.fspath(given)
 
 
 def _check_spec(spec: SimulationSpec) -> tuple[RunLayout, tuple[str, ...]]:

@@ -19,7 +19,9 @@ Keys (N_r = frames of radar r, T = ground-truth samples; times are Unix seconds,
   recovers), and the scatterers it saw: ``r/offsets`` ``(N_r + 1,)`` indexing the
   concatenated ``r/target_ident``, ``r/target_position`` (radar frame at the frame start [m]),
   ``r/target_velocity`` (relative velocity, radar frame), ``r/target_range_rate``,
-  ``r/target_amplitude`` (``|a|/R²`` per ADC sample [counts]).
+  ``r/target_amplitude`` (``|a|/R²`` per ADC sample [counts]); ``r/coupling`` complex64
+  ``(tx, rx, sample)``: the coupling the frames carry, as its unwindowed, unnormalised FFT over
+  samples (the first bins are what ``coupling_calib.txt`` holds).
 - ``imu_accel_bias``, ``imu_gyro_bias`` ``(3,)``.
 """
 

@@ -6,14 +6,23 @@ Every ``plot_*`` returns a :class:`matplotlib.figure.Figure`; :func:`save_figure
 """
 
 from ._figure import cell_edges, new_figure, save_figure, to_db
-from .animate import animate_run, animation_times, ffmpeg_path
-from .frame_views import VIEWS, frame_figure, range_azimuth_figure, range_doppler_figure
-from .radar import plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
+from .animate import AnimationSettings, animate_run, animation_times, ffmpeg_path
+from .frame_views import (
+    VIEWS,
+    FrameViewOptions,
+    frame_figure,
+    range_azimuth_figure,
+    range_doppler_figure,
+)
+from .radar import SliceOptions, plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
 from .scene import Scene, draw_scene, gather_scene, plot_scene, scene_time
 
 __all__ = [
     "VIEWS",
+    "AnimationSettings",
+    "FrameViewOptions",
     "Scene",
+    "SliceOptions",
     "animate_run",
     "animation_times",
     "cell_edges",

@@ -13,7 +13,9 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import numpy as np
@@ -34,7 +36,7 @@ from .scene import (
     gather_scene,
 )
 
-__all__ = ["animate_run", "animation_times", "ffmpeg_path"]
+__all__ = ["AnimationSettings", "animate_run", "animation_times", "ffmpeg_path"]
 
 
 def ffmpeg_path() -> str | None:
@@ -82,12 +84,28 @@ def animation_times(seq, start: float = 0.0, duration: float | None = None,
     return t0 + np.arange(n) / fps
 
 
-def animate_run(seq, out: str | os.PathLike[str], *, start: float = 0.0,
-                duration: float | None = None, fps: float = 10.0, frame: str = "base",
-                view: str = "bev", extent: float = 20.0, rate_limit: float | None = None,
-                size: tuple[float, float] = (8.0, 7.2), dpi: int = 100,
+@dataclass(frozen=True)
+class AnimationSettings:
+    """What :func:`animate_run` renders and how (each field is also one of its keywords,
+    documented there)."""
+
+    start: float = 0.0
+    duration: float | None = None
+    fps: float = 10.0
+    frame: str = "base"
+    view: str = "bev"
+    extent: float = 20.0
+    rate_limit: float | None = None
+    size: tuple[float, float] = (8.0, 7.2)
+    dpi: int = 100
+
+
+_ANIMATION_FIELDS = frozenset(f.name for f in fields(AnimationSettings))
+
+
+def animate_run(seq, out: str | os.PathLike[str], settings: AnimationSettings | None = None, *,
                 overwrite: bool = False, progress: Callable[[int, int], None] | None = None,
-                **gather) -> Path:
+                **options: Any) -> Path:
     """Render a run to ``out`` (``.mp4`` or ``.gif``).
 
     Parameters
@@ -96,6 +114,20 @@ def animate_run(seq, out: str | os.PathLike[str], *, start: float = 0.0,
         A sequence.
     out
         Output file; written atomically (a temporary file in the same folder, then renamed).
+    settings
+        An :class:`AnimationSettings` (its fields are listed below); keyword arguments named
+        like its fields replace them (``animate_run(seq, "run.gif", fps=4)``), the others go
+        to :func:`~coloradar.viz.scene.gather_scene`.
+    overwrite
+        Replace an existing ``out``; otherwise :class:`~coloradar.OutputExistsError`.
+    progress
+        Called as ``progress(done, total)`` after each picture.
+    **options
+        Fields of :class:`AnimationSettings`, and keywords of
+        :func:`~coloradar.viz.scene.gather_scene`.
+
+    Other Parameters
+    ----------------
     start, duration, fps
         See :func:`animation_times`.
     frame
@@ -104,30 +136,28 @@ def animate_run(seq, out: str | os.PathLike[str], *, start: float = 0.0,
         See :func:`~coloradar.viz.scene.draw_scene` and :func:`~coloradar.viz.plot_scene`.
     size, dpi
         Picture size in inches and resolution (``size·dpi`` pixels; rounded to even).
-    overwrite
-        Replace an existing ``out``; otherwise :class:`~coloradar.OutputExistsError`.
-    progress
-        Called as ``progress(done, total)`` after each picture.
-    **gather
-        Passed to :func:`~coloradar.viz.scene.gather_scene`.
 
     Returns
     -------
     pathlib.Path
         ``out``.
     """
+    s = replace(settings or AnimationSettings(),
+                **{k: v for k, v in options.items() if k in _ANIMATION_FIELDS})
+    gather = {k: v for k, v in options.items() if k not in _ANIMATION_FIELDS}
+    fps, frame, view, extent, dpi = s.fps, s.frame, s.view, s.extent, s.dpi
     out = new_output_path(out, overwrite)
     suffix = out.suffix.lower()
     writer = _writer(suffix, fps)
-    times = animation_times(seq, start, duration, fps)
-    w, h = (2 * round(v * dpi / 2) / dpi for v in size)  # even pixel counts for x264
+    times = animation_times(seq, s.start, s.duration, fps)
+    w, h = (2 * round(v * dpi / 2) / dpi for v in s.size)  # even pixel counts for x264
     fig = new_figure(w, h, dpi, projection="3d" if view == "3d" else None)
     ax = fig.axes[0]
-    if rate_limit is None:
+    if s.rate_limit is None:
         probe = gather_scene(seq, float(times[0]), frame=frame, **gather)
         norm = _rate_norm(seq, probe, None)
     else:
-        norm = Normalize(-rate_limit, rate_limit)
+        norm = Normalize(-s.rate_limit, s.rate_limit)
     fig.colorbar(ScalarMappable(norm=norm, cmap="coolwarm"), ax=ax,
                  label="radar range rate [m/s] (+ receding)", shrink=0.8)
     t_run = _run_start(seq)

@@ -7,6 +7,7 @@ has them (else heatmaps computed from ADC); the scene view is :func:`~.scene.plo
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -17,7 +18,8 @@ from ..errors import MissingDataError, SettingsError
 from .radar import HeatmapView, plot_heatmap_slice, plot_range_azimuth, plot_range_doppler
 from .scene import _has, _run_start, plot_scene, radar_source
 
-__all__ = ["VIEWS", "frame_figure", "range_azimuth_figure", "range_doppler_figure"]
+__all__ = ["VIEWS", "FrameViewOptions", "frame_figure", "range_azimuth_figure",
+           "range_doppler_figure"]
 
 VIEWS = ("range-doppler", "range-azimuth", "heatmap", "scene")
 
@@ -51,10 +53,22 @@ def range_azimuth_figure(adc: np.ndarray, calib: RadarCalib, *,
                               mode=mode, title=title or f"{calib.name} range–azimuth", **kw)
 
 
-def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
-                 coords: str = "base", scene_view: str = "bev", stream: str | None = None,
-                 extent: float | None = 20.0, heatmap_slice: HeatmapView = "azimuth-range",
-                 polar: bool = False, max_range: float | None = None) -> Figure:
+@dataclass(frozen=True)
+class FrameViewOptions:
+    """How :func:`frame_figure` draws a frame (each field is also one of its keywords,
+    documented there)."""
+
+    coords: str = "base"
+    scene_view: str = "bev"
+    stream: str | None = None
+    extent: float | None = 20.0
+    heatmap_slice: HeatmapView = "azimuth-range"
+    polar: bool = False
+    max_range: float | None = None
+
+
+def frame_figure(seq, view: str, index: int = 0, options: FrameViewOptions | None = None, *,
+                 radar: str | None = None, **fields: Any) -> Figure:
     """The ``view`` picture of frame ``index`` of ``seq``.
 
     Parameters
@@ -66,10 +80,16 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
     index
         Frame index in the radar's ADC stream (range-doppler, range-azimuth), its heatmap
         stream (heatmap), or the scene's reference stream (scene; see ``stream``).
+    options
+        A :class:`FrameViewOptions` (its fields are listed below); keyword arguments named
+        like its fields replace them (``frame_figure(seq, "scene", 3, coords="world")``).
     radar
         ``"cascade"`` or ``"single_chip"``; None: the cascade, and for the scene both radars.
         A scene with a radar named shows the lidar and that radar only, and ``index`` counts
         in that radar's point stream unless ``stream`` is given.
+
+    Other Parameters
+    ----------------
     coords, scene_view, stream, extent
         Scene: frame (``"base"``, ``"world"`` or a sensor name), ``"bev"`` or ``"3d"``, the
         stream ``index`` counts in, half-width [m] (:func:`~.scene.plot_scene`).
@@ -80,6 +100,8 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
     max_range
         Clip range axes [m].
     """
+    o = replace(options or FrameViewOptions(), **fields)
+    stream, heatmap_slice, polar, max_range = o.stream, o.heatmap_slice, o.polar, o.max_range
     if view not in VIEWS:
         raise SettingsError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
     if view == "scene":
@@ -92,8 +114,8 @@ def frame_figure(seq, view: str, index: int = 0, *, radar: str | None = None,
                                            f"or heatmaps to show (present: "
                                            f"{', '.join(seq.available()) or 'nothing'})")
             gather["sensors"] = ("lidar", radar)
-        return plot_scene(seq, index=index, stream=stream, frame=coords, view=scene_view,
-                          extent=extent, **gather)
+        return plot_scene(seq, index=index, stream=stream, frame=o.coords, view=o.scene_view,
+                          extent=o.extent, **gather)
     radar = radar or "cascade"
     calib = seq.calib.radar(radar)
     t_run = _run_start(seq)

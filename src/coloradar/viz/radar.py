@@ -8,7 +8,8 @@ as seen from behind the sensor, and range grows upward.
 
 from __future__ import annotations
 
-from typing import Literal
+from dataclasses import dataclass, replace
+from typing import Any, Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -20,6 +21,7 @@ from ._figure import cell_edges, new_figure, to_db
 
 __all__ = [
     "HeatmapView",
+    "SliceOptions",
     "plot_heatmap_slice",
     "plot_range_azimuth",
     "plot_range_doppler",
@@ -190,13 +192,24 @@ def _pick(hm: np.ndarray, axis: int, index: int | None, reduce: Literal["slice",
     return np.take(inten, index, axis), np.take(rate, index, axis), index % inten.shape[axis]
 
 
-def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
-                       view: HeatmapView = "azimuth-range", index: int | None = None,
-                       reduce: Literal["slice", "max"] = "slice", db: bool = True,
-                       dynamic_range: float = 40.0,
-                       show_range_rate: bool = True, max_range: float | None = None,
-                       title: str | None = None, size: tuple[float, float] | None = None
-                       ) -> Figure:
+@dataclass(frozen=True)
+class SliceOptions:
+    """How :func:`plot_heatmap_slice` cuts and draws a heatmap (each field is also one of its
+    keywords, documented there)."""
+
+    view: HeatmapView = "azimuth-range"
+    index: int | None = None
+    reduce: Literal["slice", "max"] = "slice"
+    db: bool = True
+    dynamic_range: float = 40.0
+    show_range_rate: bool = True
+    max_range: float | None = None
+    title: str | None = None
+    size: tuple[float, float] | None = None
+
+
+def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig,
+                       options: SliceOptions | None = None, **fields: Any) -> Figure:
     """A 2-D cut through a 3-D radar heatmap, with its range-rate channel beside it.
 
     Parameters
@@ -207,6 +220,12 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
     config
         The heatmap's grid (bin angles and range bin width); for the dataset's shipped
         heatmaps, the calib's ``heatmap_cfg`` (see docs/calibration.md on its angle lists).
+    options
+        A :class:`SliceOptions` (its fields are listed below); keyword arguments named like
+        its fields replace them (``plot_heatmap_slice(hm, cfg, view="elevation-azimuth")``).
+
+    Other Parameters
+    ----------------
     view
         ``"azimuth-range"`` (at one elevation bin) or ``"elevation-azimuth"`` (at one range
         bin).
@@ -222,6 +241,8 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
     Figure
         ``axes[0].collections[0]``: the intensity mesh (corners in degrees and metres).
     """
+    o = replace(options or SliceOptions(), **fields)
+    view, index, reduce, db, show_range_rate = o.view, o.index, o.reduce, o.db, o.show_range_rate
     hm = np.asarray(heatmap, dtype=np.float32)
     if hm.ndim == 3:
         hm = np.stack([hm, np.zeros_like(hm)], axis=-1)
@@ -239,9 +260,9 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
     else:
         raise SettingsError(f"view must be 'azimuth-range' or 'elevation-azimuth', got {view!r}")
     ncols = 2 if show_range_rate else 1
-    fig = new_figure(*(size or (6.5 * ncols, 5.5)), ncols=ncols)
+    fig = new_figure(*(o.size or (6.5 * ncols, 5.5)), ncols=ncols)
     img = to_db(inten) if db else inten
-    vmin, vmax = _levels(img, dynamic_range if db else None)
+    vmin, vmax = _levels(img, o.dynamic_range if db else None)
     strong = img >= (vmax - 20.0 if db else 0.1 * vmax)
     az_edges = np.degrees(np.clip(cell_edges(config.azimuth_bins), -np.pi / 2, np.pi / 2))
     panels = [(img, "viridis", vmin, vmax, "intensity [dB]" if db else "intensity")]
@@ -254,8 +275,8 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
             r_edges = np.maximum(cell_edges(config.range_bins), 0.0)
             mesh = ax.pcolormesh(az_edges, r_edges, data.T, cmap=cmap, vmin=lo, vmax=hi)
             ax.set_ylabel("range [m]")
-            if max_range is not None:
-                ax.set_ylim(0, max_range)
+            if o.max_range is not None:
+                ax.set_ylim(0, o.max_range)
         else:
             el_edges = np.degrees(np.clip(cell_edges(config.elevation_bins), -np.pi / 2,
                                           np.pi / 2))
@@ -265,8 +286,8 @@ def plot_heatmap_slice(heatmap: np.ndarray, config: HeatmapConfig, *,
         ax.set_xlabel("azimuth [deg] (+ = left)")
         fig.colorbar(mesh, ax=ax, label=label)
     fig.axes[0].set_title(f"{view}: {where}", fontsize="medium")
-    if title:
-        fig.suptitle(title, fontsize="medium")
+    if o.title:
+        fig.suptitle(o.title, fontsize="medium")
     if show_range_rate:
         fig.axes[1].set_title("range rate of the strong cells", fontsize="medium")
     return fig
