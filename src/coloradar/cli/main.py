@@ -12,6 +12,7 @@ import warnings
 
 from .. import __version__
 from ..errors import ColoradarError
+from ..progress import interrupt_handling
 from ._common import UsageError, cli_wording
 
 __all__ = ["build_parser", "main"]
@@ -46,7 +47,9 @@ def main(argv: list[str] | None = None) -> int:
     warnings.simplefilter("once")
     warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {cli_wording(str(msg))}\n"
     try:
-        code = int(args.func(args) or 0)
+        # Ctrl-C stops every command within a unit of work, even where Python would swallow it.
+        with interrupt_handling():
+            code = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler below
         return code
     except BrokenPipeError:

@@ -11,7 +11,14 @@ from ..batch.driver import DEFAULT_CHUNK_SIZE, process
 from ..batch.output_folder import PRODUCTS
 from ..dsp import ProcessingSettings
 from ..formats.source import check_input_path
-from ._common import UsageError, add_executor_args, executor_from_args, positive_int, processing_setting
+from ._common import (
+    UsageError,
+    add_executor_args,
+    check_output_outside_dataset,
+    executor_from_args,
+    positive_int,
+    processing_setting,
+)
 
 
 def _frames(text: str) -> slice:
@@ -92,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(f"--set: {exc}") from None
     check_input_path(args.path, "a run folder, a run .zip or a dataset root folder")
+    check_output_outside_dataset(args.out, (args.path, args.calib))
     try:
         report = process(args.path, args.out, runs=args.runs, calib=args.calib,
                          radars=args.radar, products=args.products, frames=args.frames,

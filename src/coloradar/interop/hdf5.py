@@ -46,7 +46,7 @@ from .._version import __version__
 from ..calib import write_calibration
 from ..dataset import Sequence, open_sequence
 from ..errors import FormatError, MissingDataError, WriteError
-from ..formats.atomic import default_file_mode, new_output_path
+from ..formats.atomic import atomic_output, new_output_path
 from ..learning.h5_file import _RAGGED, _SCALARS, DESCRIPTIONS, FORMAT, FORMAT_VERSION, H5Run, _h5py
 from ..learning.samples import SyncedSamples
 from ..learning.targets import TargetSettings
@@ -166,22 +166,16 @@ def export_hdf5(source: Sequence | str | os.PathLike[str], out: str | os.PathLik
                 "shuffle": True}
     elif o.compression == "lzf":
         comp = {"compression": "lzf", "shuffle": True}
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    if o.progress is not None:
+        o.progress(0, len(view))  # said at once: the first sample may fuse the lidar map first
     try:
-        with h5py.File(tmp, "w") as f:
+        with atomic_output(out) as tmp, h5py.File(tmp, "w") as f:
             _write_attributes(f, seq, view, o)
             shapes = _write_samples(f, view, comp, o.progress)
-        os.chmod(tmp, default_file_mode())
-        os.replace(tmp, out)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
+        if isinstance(exc, WriteError):
+            raise
         raise WriteError(f"{out}: cannot write the HDF5 file ({exc})") from exc
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return Hdf5ExportResult(out, len(view), out.stat().st_size, time.perf_counter() - t0, shapes,
                             dict(view.dropped))
 
