@@ -128,7 +128,7 @@ def test_evaluate_warns_when_the_estimate_outlasts_the_ground_truth(root, tmp_pa
 ], ids=lambda a: " ".join(a))
 def test_no_command_writes_into_the_dataset(root, argv, capsys):
     before = _tree(root)
-    code, out, err = _cli([a.format(run=root / RUN, root=root) for a in argv], capsys)
+    code, _, err = _cli([a.format(run=root / RUN, root=root) for a in argv], capsys)
     assert code != 0 and "never writes into a dataset" in err, err
     assert "--overwrite" not in err
     assert _tree(root) == before

@@ -83,9 +83,7 @@ def output_format(out: str, fmt: str | None) -> str:
                              f"{suffix or '(none)'}; name a .bag (ros1) or .h5 (hdf5) file, or "
                              "pass --format (ros2 for a ROS 2 bag folder)")
         return named
-    # ros2 bags are folders: any suffix that names a file format contradicts it.
-    ok = named is None if fmt == "ros2" else named == fmt
-    if not ok:
+    if named is not None and named != fmt:  # e.g. x.bag --format hdf5: refused, not written
         raise UsageError(f"--format {fmt} ({FORMATS[fmt]}) but OUT is {out}; name the file as "
                          "its format is (.bag: ros1, no suffix: ros2, .h5: hdf5)")
     return fmt
