@@ -370,3 +370,9 @@ def test_map_says_where_its_radar_points_came_from(root, tmp_path, capsys):
     code, out, _ = _cli(["map", root / RUN, "--sensor", "single_chip", "--products",
                          tmp_path / "hm", "--out", tmp_path / "m2.pcd"], capsys)
     assert code == 0 and "the run's own point clouds" in out
+
+
+# -- beyond the list -----------------------------------------------------------------------------
+def test_a_misspelt_command_gets_the_close_name(capsys):
+    code, _, err = _cli(["exprot", "a", "b"], capsys)
+    assert code == 2 and "did you mean export" in err
