@@ -122,7 +122,7 @@ def test_evaluate_warns_when_the_estimate_outlasts_the_ground_truth(root, tmp_pa
     ["process", "{run}", "--out", "{run}/processed"],
     ["process", "{root}", "--out", "{root}/processed"],
     ["animate", "{run}", "--out", "{run}/lidar/v.gif"],
-    ["score", "{run}", "{run}", "--out", "{run}/s.json"],
+    ["score", "{root}", "{run}", "--out", "{run}/s.json"],
     ["simulate", "{run}/sim"],
     ["export", "{run}", "{root}/calib/x.bag"],
 ], ids=lambda a: " ".join(a))
@@ -329,7 +329,7 @@ def test_the_driver_ends_its_pool_on_ctrl_c_and_a_resumed_bar_counts_what_is_don
     code, _, err = _cli(argv, capsys)
     assert code == 130 and ended == ["terminate"]
     report = json.loads((out / "process_report.json").read_text())
-    assert report["status"] == "interrupted" if "status" in report else True
+    assert report["status"] == "interrupted"
     monkeypatch.setattr(driver, "make_executor", lambda jobs: SerialExecutor())
     code, _, err = _cli(argv, capsys)
     assert code == 0
@@ -376,3 +376,16 @@ def test_map_says_where_its_radar_points_came_from(root, tmp_path, capsys):
 def test_a_misspelt_command_gets_the_close_name(capsys):
     code, _, err = _cli(["exprot", "a", "b"], capsys)
     assert code == 2 and "did you mean export" in err
+
+
+def test_more_tired_user_mistakes_are_said_as_such(root, tmp_path, capsys):
+    run = root / RUN
+    code, _, err = _cli(["score", run, tmp_path], capsys)          # swapped
+    assert code == 2 and "swapped" in err
+    code, _, err = _cli(["export", run, tmp_path / "b", "--format", "ros2", "--streams",
+                         "lidar"], capsys)
+    assert code == 2 and "did you mean lidar/pointclouds" in err
+    code, _, err = _cli(["animate", run, "--out", tmp_path / "v.mp3"], capsys)
+    assert code == 2 and ".rrd" in err
+    code, _, err = _cli(["evaluate", run], capsys)                  # a run for DIR
+    assert code == 1 and "never writes into a dataset" in err

@@ -199,6 +199,24 @@ def new_output_file(out: str, overwrite: bool,
     return new_output_path(out, overwrite)
 
 
+def did_you_mean(name: str, names: Iterable[str]) -> str:
+    """``"did you mean pfa? "`` for the known ``names`` closest to a misspelt ``name``
+    (difflib), or ``""`` when none is close."""
+    names = list(names)
+    # "lidar" for "lidar/pointclouds": a known name it begins is as close as a misspelling.
+    starts = [n for n in names if name and n.startswith(name) and n != name]
+    close = list(dict.fromkeys(starts + difflib.get_close_matches(name, names, n=2,
+                                                                  cutoff=0.6)))[:2]
+    return f"did you mean {' or '.join(close)}? " if close else ""
+
+
+def is_run_folder_path(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a run folder of the dataset (it holds a recorded run's sensor
+    folders), without opening it."""
+    p = Path(path)
+    return p.is_dir() and _has_run_marker(p)
+
+
 def _setting_names() -> list[str]:
     from dataclasses import fields
 
@@ -218,8 +236,7 @@ def processing_setting(text: str) -> tuple[str, object]:
         name, sep, _ = text.partition("=")
         names = _setting_names()
         if sep and name.strip() not in names:
-            close = difflib.get_close_matches(name.strip(), names, n=3, cutoff=0.6)
-            hint = f"did you mean {' or '.join(close)}? " if close else ""
+            hint = did_you_mean(name.strip(), names)
             raise argparse.ArgumentTypeError(
                 f"unknown setting {name.strip()!r} in {text!r}; {hint}"
                 f"(settings: {', '.join(names)})") from None

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..dataset import open_sequence
 from ..progress import Progress
 from ._common import (
+    UsageError,
     add_file_output_args,
     add_quiet_arg,
     check_input,
@@ -45,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
     from ..viz import animate_run
 
     check_input(args.run)
+    if Path(args.out).suffix.lower() not in (".mp4", ".gif", ".rrd"):
+        raise UsageError(f"--out {args.out}: expected a .mp4, .gif or .rrd file")
     out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
     if out.suffix.lower() == ".rrd":

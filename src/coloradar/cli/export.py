@@ -13,7 +13,14 @@ from ..interop.bag_export import GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, export_b
 from ..interop.ros_messages import DEFAULT_TOPICS, ROS_FORMATS
 from ..progress import Progress
 from . import _export_hdf5
-from ._common import UsageError, check_input, new_output_file, processing_setting
+from ._common import (
+    UsageError,
+    check_input,
+    check_output_outside_dataset,
+    did_you_mean,
+    new_output_file,
+    processing_setting,
+)
 
 # What each format is, and the suffix that names it (ros2 bags are folders: no suffix).
 FORMATS = {"ros1": "ROS 1 bag: one .bag file", "ros2": "ROS 2 bag: a folder (no suffix)",
@@ -91,11 +98,16 @@ def output_format(out: str, fmt: str | None) -> str:
 
 def run(args: argparse.Namespace) -> int:
     check_input(args.run)  # inputs first: swapped arguments are said as such
+    check_output_outside_dataset(args.out, (args.run, args.calib))
     args.format = output_format(args.out, args.format)
-    new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
+    new_output_file(args.out, args.overwrite)
     if args.format == _export_hdf5.HDF5:
         return _export_hdf5.run(args)
     streams = [s.strip() for s in args.streams.split(",") if s.strip()] if args.streams else None
+    for s in streams or ():
+        if s not in DEFAULT_TOPICS:
+            raise UsageError(f"--streams: unknown stream {s!r}; {did_you_mean(s, DEFAULT_TOPICS)}"
+                             f"(streams: {', '.join(DEFAULT_TOPICS)})")
     seq = open_sequence(args.run, calib=args.calib)
     prog = Progress(0, f"{seq.name} -> {args.format}", unit="messages", enabled=not args.quiet)
     res = export_bag(seq, args.out, args.format, streams=streams, topics=dict(args.topic),

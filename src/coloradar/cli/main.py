@@ -4,7 +4,6 @@ defines ``register(subparsers)``; the modules hold no processing logic of their 
 from __future__ import annotations
 
 import argparse
-import difflib
 import importlib
 import os
 import pkgutil
@@ -14,7 +13,7 @@ import warnings
 from .. import __version__
 from ..errors import ColoradarError
 from ..progress import interrupt_handling
-from ._common import UsageError, cli_wording
+from ._common import UsageError, cli_wording, did_you_mean
 
 __all__ = ["build_parser", "main"]
 
@@ -63,8 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser(command)
     choices = _commands(parser)
     if command is not None and command not in choices:
-        close = difflib.get_close_matches(command, choices, n=2, cutoff=0.6)
-        hint = f"did you mean {' or '.join(close)}? " if close else ""
+        hint = did_you_mean(command, choices)
         print(f"coloradar: error: unknown command {command!r}; {hint}(commands: "
               f"{', '.join(choices)}; see: coloradar --help)", file=sys.stderr)
         return 2

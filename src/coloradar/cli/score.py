@@ -8,7 +8,13 @@ from ..formats.atomic import new_output_path
 from ..learning.scoring import PREDICTION_SUFFIXES, format_score_report, score_folder, write_score_report
 from ..learning.targets import TargetSettings
 from ..progress import Progress
-from ._common import check_input, check_output_outside_dataset, positive_int
+from ._common import (
+    UsageError,
+    check_input,
+    check_output_outside_dataset,
+    is_run_folder_path,
+    positive_int,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,6 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if is_run_folder_path(args.pred_dir):
+        raise UsageError(f"{args.pred_dir}: this is a ColoRadar run, not a folder of predicted "
+                         "clouds (are the arguments swapped? PRED_DIR comes first)")
     if not args.run.lower().endswith((".h5", ".hdf5")):
         check_input(args.run, "a run folder or .zip, or an exported .h5 file")
     if args.out:
