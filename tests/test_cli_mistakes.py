@@ -389,3 +389,14 @@ def test_more_tired_user_mistakes_are_said_as_such(root, tmp_path, capsys):
     assert code == 2 and ".rrd" in err
     code, _, err = _cli(["evaluate", run], capsys)                  # a run for DIR
     assert code == 1 and "never writes into a dataset" in err
+
+
+def test_hdf5_export_is_chunked_per_sample_and_compressed_by_default(root, tmp_path, capsys):
+    h5py = pytest.importorskip("h5py")
+    code, _, err = _cli(["export", root / RUN, tmp_path / "x.h5", "--radar", "single_chip",
+                         "--quiet"], capsys)
+    assert code == 0, err
+    with h5py.File(tmp_path / "x.h5") as f:
+        hm = f["heatmap"]
+        assert hm.chunks == (1, *hm.shape[1:]) and hm.compression == "gzip" and hm.shuffle
+        assert hm.id.get_storage_size() < hm.nbytes   # random floats still lose their exponents

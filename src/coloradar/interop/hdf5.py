@@ -104,7 +104,7 @@ class Hdf5Export:
     target_settings: TargetSettings | None = None
     views: ViewOptions | None = None
     compression: str = "gzip"
-    compression_level: int = 4
+    compression_level: int = 1
     pose_source: str = "groundtruth"
     calib: Any = None
     overwrite: bool = False
@@ -132,7 +132,8 @@ def export_hdf5(source: Sequence | str | os.PathLike[str], out: str | os.PathLik
         ``"gzip"`` (portable: every HDF5 reader has it), ``"lzf"`` (faster, h5py only) or
         ``"none"``.
     compression_level
-        gzip level 1–9.
+        gzip level 1–9 (default 1: about twice as fast to write as level 4 for 2–3 % more
+        bytes, benchmarks/bench_learning.py).
     calib
         Calibration for a run given as a path (None: found beside it).
     overwrite
