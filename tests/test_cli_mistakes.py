@@ -121,6 +121,7 @@ def test_evaluate_warns_when_the_estimate_outlasts_the_ground_truth(root, tmp_pa
     ["odometry", "{run}", "--out", "{run}/odo"],
     ["process", "{run}", "--out", "{run}/processed"],
     ["process", "{root}", "--out", "{root}/processed"],
+    ["process", "{run}", "--out", "{root}"],
     ["animate", "{run}", "--out", "{run}/lidar/v.gif"],
     ["score", "{root}", "{run}", "--out", "{run}/s.json"],
     ["simulate", "{run}/sim"],

@@ -123,10 +123,14 @@ def _protected(inputs: Iterable[str | os.PathLike[str] | None]) -> list[tuple[Pa
         if given is None:
             continue
         p = Path(given).resolve()
-        if p.is_dir() and _has_run_marker(p):
+        if (p.is_dir() and _has_run_marker(p)) or (p.is_file() and p.suffix.lower() == ".zip"):
             out.append((p, "the run"))
             out += [(p.parent / c, "the calibration") for c in _CALIB_NAMES
                     if (p.parent / c).exists()]
+            if any((p.parent / c).exists() for c in _CALIB_NAMES):
+                # The dataset root itself (not a folder inside it, such as root/processed):
+                # product folders written there would make the root look like a run.
+                out.append((p.parent, "the dataset root"))
         elif p.is_dir():
             out.append((p, "the input folder"))
         elif p.exists():
@@ -141,8 +145,10 @@ def check_output_outside_dataset(out: str | os.PathLike[str],
     ``out`` (a file or folder about to be written) may not be, or lie inside, one of
     ``inputs`` (runs, dataset roots, run zips, calib folders; None entries are skipped), the
     calib folder beside an input run, or any run folder at all (a folder holding a run's
-    sensor folders: ``lidar/``, ``imu/``, ``groundtruth/``, ``<radar>/adc_samples/``...). Call
-    it after checking the inputs and before anything is read or written.
+    sensor folders: ``lidar/``, ``imu/``, ``groundtruth/``, ``<radar>/adc_samples/``...); nor
+    be the dataset root that holds an input run (a folder inside that root, such as
+    ``root/processed``, is allowed). Call it after checking the inputs and before anything is
+    read or written.
 
     Parameters
     ----------
@@ -169,7 +175,7 @@ def check_output_outside_dataset(out: str | os.PathLike[str],
             raise WriteError(f"{path}: this is {what} the command reads, not an output; "
                              "coloradar never writes into a dataset (are the arguments "
                              "swapped? see --help)")
-        if _inside(target, p):
+        if _inside(target, p) and what != "the dataset root":
             raise WriteError(f"{path}: lies inside {what} {p}; coloradar never writes into a "
                              "dataset: choose an output outside it")
     for folder in (target, *target.parents):
