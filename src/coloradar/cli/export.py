@@ -73,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--groundtruth-msg", choices=GROUNDTRUTH_MSGS, default="odometry",
                    help="nav_msgs/Odometry (default) or geometry_msgs/PoseStamped")
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing bag")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     _export_hdf5.add_arguments(p)
     p.set_defaults(func=run)
