@@ -86,11 +86,12 @@ def main() -> None:
         rows.append(("read raw frames (heatmap, points, every lidar scan)", t, None))
         t, _ = _best(build, args.repeat)
         rows.append(("build samples from the folder (no file)", t, None))
-        for comp in ("gzip", "lzf", "none"):
+        for comp, level in (("gzip", 4), ("gzip", 1), ("lzf", 0), ("none", 0)):
             out = tmp / f"run_{comp}.h5"
-            t, r = _best(lambda c=comp, o=out: export_hdf5(run, o, compression=c, overwrite=True,
-                                                          **opts), args.repeat)
-            rows.append((f"export hdf5 ({comp})", t, r.bytes))
+            t, r = _best(lambda c=comp, o=out, k=level: export_hdf5(
+                run, o, compression=c, compression_level=k or 4, overwrite=True, **opts),
+                args.repeat)
+            rows.append((f"export hdf5 ({comp}{f' level {level}' if level else ''})", t, r.bytes))
         back = SyncedSamples(tmp / "run_gzip.h5")
 
         def read_back() -> int:

@@ -2,10 +2,10 @@
 that the docs cannot drift from what the code does.
 
 - ```python blocks run in order, one namespace per Markdown file, in a scratch folder holding
-  ``data`` (the shared simulated dataset, below), ``calib`` and the run
-  ``12_21_2020_ec_hallways_run0``; the real-data names of the examples are mapped onto it:
-  ``/data/coloradar`` is a dataset root holding that run, and ``<run>.zip`` is the run folder.
-  A block whose optional package (torch, ...) is not installed is skipped, saying so.
+  ``data`` (the shared simulated dataset, below) and nothing else: a block a user copies runs
+  as written on what ``coloradar simulate`` (or ``coloradar demo``) writes, with no real-data
+  name to edit (a real name may appear in a comment). A block whose optional package (torch,
+  ...) is not installed is skipped, saying so.
 - Transcripts (``$ coloradar ...`` lines, each followed by its output) run in a scratch folder
   of their own that holds ``data``, and what each command prints is compared with what the
   doc shows (rules in ``tests/_docblocks.py``: text, names, columns and counts exact, figures
@@ -28,7 +28,6 @@ import importlib.util
 import io
 import os
 import shlex
-import shutil
 import warnings
 from pathlib import Path
 
@@ -41,7 +40,6 @@ ROOT = Path(__file__).resolve().parents[1]
 DOC_FILES = ["README.md", *sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md"))]
 SHARED_SIM = "coloradar simulate data --scene courtyard --duration 6 --seed 1"
 SIM_RUN = "11_21_2026_sim_courtyard_run1"
-REAL_RUN = "12_21_2020_ec_hallways_run0"
 OPTIONAL = {"torch", "rerun", "distributed", "dask"}
 
 # Blocks of docs owned by other work in progress that do not agree with the code yet, keyed by
@@ -79,20 +77,8 @@ def shared(tmp_path_factory) -> dict:
     finally:
         os.chdir(cwd)
     assert sim[0] == 0, sim[2]
-    # /data/coloradar of the examples: a dataset root holding the run under a real run's name
-    # (hard links: no copy of the 350 MB).
-    real = base / "coloradar"
-    shutil.copytree(base / "data" / "calib", real / "calib")
-    shutil.copytree(base / "data" / SIM_RUN, real / REAL_RUN, copy_function=_link_or_copy)
-    return {"base": base, "data": base / "data", "real": real, "outputs": {SHARED_SIM: sim},
+    return {"base": base, "data": base / "data", "outputs": {SHARED_SIM: sim},
             "namespaces": {}, "ran": set()}
-
-
-def _link_or_copy(src: str, dst: str) -> None:
-    try:
-        os.link(src, dst)
-    except OSError:                        # a file system without hard links
-        shutil.copy2(src, dst)
 
 
 def _listing(folder: Path) -> list[str]:
@@ -109,15 +95,11 @@ def _scratch(shared: dict, name: str) -> Path:
 
 def _python_source(block: Block, shared: dict) -> str:
     src = "\n".join(block.body)
-    return (src.replace("/data/coloradar", str(shared["real"]))
-               .replace(f"{REAL_RUN}.zip", REAL_RUN))
+    return src  # as a user copies it: no name is mapped
 
 
 def _exec_python(block: Block, shared: dict, monkeypatch) -> None:
     d = _scratch(shared, block.file)
-    for name, target in (("calib", shared["data"] / "calib"), (REAL_RUN, shared["real"] / REAL_RUN)):
-        if not (d / name).exists():
-            (d / name).symlink_to(target, target_is_directory=True)
     monkeypatch.chdir(d)
     # Run as a script is: examples guarded by `if __name__ == "__main__":` run too.
     ns = shared["namespaces"].setdefault(block.file, {"__name__": "__main__"})
@@ -222,3 +204,12 @@ def test_markers_are_read(tmp_path):
     assert (a.kind, a.reason) == ("skip", "needs real data")
     assert b.kind == "transcript" and b.commands == [("coloradar info data --x", ["out 1"])]
     assert c.kind == "unmarked"
+
+
+def test_copyable_python_blocks_name_no_real_dataset_path():
+    """A user on the "no download" path copies a block and runs it as is: the code (comments
+    aside) names what `coloradar simulate`/`demo` writes, never a real run or /data/coloradar."""
+    bad = [b.id for b in BLOCKS if b.kind == "python" and any(
+        name in "\n".join(ln.split("#", 1)[0] for ln in b.body)
+        for name in ("/data/coloradar", "12_21_2020_"))]
+    assert not bad, f"blocks that name real data outside a comment: {bad}"

@@ -5,15 +5,58 @@ stages (e.g. a simulator's lidar, cascade and single-chip frames) on one line. B
 callables ``progress(done, total)``, the callback signature the library's long functions take.
 On a terminal they redraw one line; otherwise (logs, CI) they print a line at most every few
 seconds, so that a redirected log stays readable.
+
+Ctrl-C: :func:`interrupt_handling` (the command line's) remembers an interrupt as well as
+raising ``KeyboardInterrupt``, and every progress update raises it again. Python ignores an
+exception raised inside a weakref callback or a ``__del__`` (h5py runs such callbacks on every
+dataset access), so an interrupt that lands there would otherwise be lost and the job finish
+with exit 0; with this, it stops at the next unit of work.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 import time
-from typing import TextIO
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any, TextIO
 
-__all__ = ["Progress", "StageProgress"]
+__all__ = ["Progress", "StageProgress", "check_interrupted", "interrupt_handling"]
+
+_interrupted = False
+
+
+def _on_sigint(signum: int, frame: Any) -> None:
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def interrupt_handling() -> Iterator[None]:
+    """Within the block, Ctrl-C (SIGINT) raises ``KeyboardInterrupt`` and is remembered, so that
+    :func:`check_interrupted` (called by every progress update) raises it again where the first
+    one was swallowed. Only in the main thread (elsewhere the block changes nothing)."""
+    global _interrupted
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _interrupted = False
+    previous = signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        _interrupted = False
+
+
+def check_interrupted() -> None:
+    """Raise ``KeyboardInterrupt`` when Ctrl-C was pressed within :func:`interrupt_handling`
+    (whether or not the first ``KeyboardInterrupt`` reached the caller)."""
+    if _interrupted:
+        raise KeyboardInterrupt
 
 
 def _fmt_time(s: float) -> str:
@@ -40,16 +83,20 @@ class Progress:
         Where to write; None for stderr. ``enabled=False`` silences it.
     min_interval
         Seconds between redraws (terminal) or lines (non-terminal, multiplied by 10).
+    initial
+        Units already done before this job (a resumed one): counted in the bar, not in the
+        rate.
     """
 
     def __init__(self, total: int, desc: str = "", unit: str = "frames", stream: TextIO | None = None,
-                 enabled: bool = True, min_interval: float = 0.2):
+                 enabled: bool = True, min_interval: float = 0.2, initial: int = 0):
         self.total = max(int(total), 0)
+        self.initial = max(int(initial), 0)
         self.desc = desc
         self.unit = unit
         self.stream = stream if stream is not None else sys.stderr
         self.enabled = enabled
-        self.done = 0
+        self.done = self.initial
         self.failed = 0
         self.start = time.perf_counter()
         self._last = 0.0
@@ -65,7 +112,7 @@ class Progress:
     def rate(self) -> float:
         """Units per second so far."""
         el = time.perf_counter() - self.start
-        return self.done / el if el > 0 else 0.0
+        return (self.done - self.initial) / el if el > 0 else 0.0
 
     def eta(self) -> float | None:
         """Seconds left at the rate measured since the first update, or None while no such
@@ -98,7 +145,9 @@ class Progress:
         self.update(int(done) - self.done)
 
     def update(self, n: int = 1, failed: int = 0) -> None:
-        """Count ``n`` more units done (``failed`` of them failed) and redraw if due."""
+        """Count ``n`` more units done (``failed`` of them failed) and redraw if due; raises
+        ``KeyboardInterrupt`` after a Ctrl-C (:func:`check_interrupted`)."""
+        check_interrupted()
         self.done += n
         self.failed += failed
         now = time.perf_counter()
@@ -150,6 +199,7 @@ class StageProgress:
         self._text = ""
 
     def __call__(self, stage: str, done: int, total: int) -> None:
+        check_interrupted()
         self.stages[stage] = (done, total)
         now = time.monotonic()
         finished = all(d >= t for d, t in self.stages.values())

@@ -320,6 +320,7 @@ def _run_chunks(active: list[_RunJob], opts: ProcessingJob, prods: tuple[str, ..
     # No more workers than tasks: one task runs here, without a pool.
     ex = (opts.executor if opts.executor is not None
           else make_executor(min(opts.jobs or os.cpu_count() or 1, n_tasks)))
+    stopped = False
     try:
         report.executor = ex.description
         tasks = _tasks(active, opts, prods)
@@ -338,9 +339,12 @@ def _run_chunks(active: list[_RunJob], opts: ProcessingJob, prods: tuple[str, ..
             rj.chunks_left -= 1
             if rj.chunks_left == 0:
                 _finish_radar(job, rj, prods)
+    except KeyboardInterrupt:
+        stopped = True  # Ctrl-C: stop within a second, not after the chunks in flight
+        raise
     finally:
         if opts.executor is None:
-            ex.close()
+            ex.terminate() if stopped else ex.close()
 
 
 def process_targets(targets: Sequence[RunTarget], report_path: str | os.PathLike | None,
@@ -386,7 +390,10 @@ def process_targets(targets: Sequence[RunTarget], report_path: str | os.PathLike
             rjob.plan = plan
             _set_todo(rjob, plan.complete, opts.chunk_size)
         total = sum(len(rj.todo) for rjob in active for rj in rjob.radars)
-        bar = Progress(total, desc=opts.desc, enabled=opts.progress and total > 0)
+        # A resumed job counts the frames already complete too (46/149, not 0/103).
+        skipped = sum(rj.outcome.skipped for rjob in active for rj in rjob.radars)
+        bar = Progress(total + skipped, desc=opts.desc, enabled=opts.progress and total > 0,
+                       initial=skipped)
         _run_chunks(active, opts, prods, report, bar)
     except WorkerStartupError as exc:
         report.error = str(exc)

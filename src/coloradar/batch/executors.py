@@ -95,6 +95,11 @@ class Executor:
     def close(self) -> None:
         """Release the workers."""
 
+    def terminate(self) -> None:
+        """Stop at once (Ctrl-C): tasks in flight are abandoned, not waited for. Every output
+        file is written atomically, so an abandoned task leaves nothing a rerun cannot redo."""
+        self.close()
+
     def __enter__(self) -> Executor:
         return self
 
@@ -139,8 +144,8 @@ def _init_worker(parent_pid: int, started: Any = None) -> None:
     # spawn start method does first) and coloradar: the pool can run tasks.
     if started is not None:
         started.set()
-    # Ctrl-C is the parent's to handle: it stops submitting, lets running tasks finish their
-    # files and writes its report; a worker interrupted mid-task would only lose that work.
+    # Ctrl-C is the parent's to handle: it ends the workers (every file they write is atomic,
+    # so a frame cut short is redone by a rerun) and writes its report.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True,
                      name="coloradar-parent-watch").start()
@@ -280,6 +285,16 @@ class LocalExecutor(Executor):
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def terminate(self) -> None:
+        # ProcessPoolExecutor has no public way to stop running tasks (before Python 3.14):
+        # end its workers (they ignore SIGINT), then shut it down without waiting.
+        procs = list((getattr(self._pool, "_processes", None) or {}).values())
+        for proc in procs:
+            proc.terminate()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.join(timeout=1.0)
 
 
 def _malloc_trim_threshold() -> str | None:

@@ -136,7 +136,10 @@ def timestamps_text(frame_ids: np.ndarray, timestamps: np.ndarray, written: np.n
 
     Readers pair line ``j`` with frame ``base + j``, ``base`` being 1 when the first file is
     number 1 and 0 otherwise (``docs/layout.md``), so the lines run from that base to the last
-    written frame; frames without an ADC timestamp read ``nan``.
+    written frame. The rule for a frame that produced nothing (its input had no finite time,
+    could not be read, or its processing failed: the report lists it): its line reads ``nan``,
+    never a time, so that the line and the missing file agree, and the stream readers pass it
+    over without a warning (:func:`coloradar.dataset.streams.open_frame_stream`).
 
     Parameters
     ----------
@@ -150,7 +153,7 @@ def timestamps_text(frame_ids: np.ndarray, timestamps: np.ndarray, written: np.n
     base = 1 if written.min() == 1 else 0
     last = int(written.max())
     lines = np.full(last - base + 1, np.nan)
-    keep = (frame_ids >= base) & (frame_ids <= last)
+    keep = np.isin(frame_ids, written) & (frame_ids >= base)
     lines[frame_ids[keep] - base] = timestamps[keep]
     return format_timestamps(lines)
 

@@ -194,7 +194,8 @@ class BatchReport:
         how = [f"{self.frames_per_second:.1f} frames/s", self.executor]
         if peak:
             how.append(f"peak worker memory {peak / 2**20:.0f} MiB")
-        lines.append(f"{t['done']} frames processed, {t['skipped']} already complete, "
+        frames = "frame" if t["done"] == 1 else "frames"
+        lines.append(f"{t['done']} {frames} processed, {t['skipped']} already complete, "
                      f"{t['failed']} failed in {self.seconds:.1f} s ({'; '.join(how)})"
                      + (" — INTERRUPTED" if self.interrupted else ""))
         if self.path is not None:

@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
 import re
+from collections.abc import Iterable
 from pathlib import Path
 
-from ..errors import ColoradarError
+from ..errors import ColoradarError, WriteError
 from ..formats.atomic import new_output_path
+from ..formats.layout import LAYOUTS, PROCESS_PRODUCTS
+from ..formats.source import check_input_path
 
 
 class UsageError(ColoradarError):
@@ -95,17 +99,151 @@ def add_quiet_arg(p: argparse.ArgumentParser) -> None:
                    help="no progress or summary lines (warnings and errors still show)")
 
 
-def new_output_file(out: str, overwrite: bool) -> Path:
-    """``out`` as a path, refusing an existing file unless ``overwrite`` (checked before any
-    input is read, so that a long command fails at once)."""
+# Folders only a recorded run has (``coloradar process`` writes <radar>/heatmaps and
+# <radar>/pointclouds into its own output folders, so those do not make a folder a run).
+_RUN_MARKERS = tuple(dict.fromkeys(
+    m for lay in LAYOUTS.values() for m in lay.run_markers
+    if m.split("/")[-1] not in PROCESS_PRODUCTS))
+_CALIB_NAMES = ("calib", "calib.zip")
+
+
+def _has_run_marker(folder: Path) -> bool:
+    return any((folder / m).is_dir() for m in _RUN_MARKERS)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _protected(inputs: Iterable[str | os.PathLike[str] | None]) -> list[tuple[Path, str]]:
+    """``(resolved path, what it is)`` of every input a command may not write into: each
+    input itself (run, dataset root, zip, calib) and the calib folder beside a run."""
+    out: list[tuple[Path, str]] = []
+    for given in inputs:
+        if given is None:
+            continue
+        p = Path(given).resolve()
+        if (p.is_dir() and _has_run_marker(p)) or (p.is_file() and p.suffix.lower() == ".zip"):
+            out.append((p, "the run"))
+            out += [(p.parent / c, "the calibration") for c in _CALIB_NAMES
+                    if (p.parent / c).exists()]
+            if any((p.parent / c).exists() for c in _CALIB_NAMES):
+                # The dataset root itself (not a folder inside it, such as root/processed):
+                # product folders written there would make the root look like a run.
+                out.append((p.parent, "the dataset root"))
+        elif p.is_dir():
+            out.append((p, "the input folder"))
+        elif p.exists():
+            out.append((p, "the input file"))
+    return out
+
+
+def check_output_outside_dataset(out: str | os.PathLike[str],
+                                 inputs: Iterable[str | os.PathLike[str] | None] = ()) -> Path:
+    """The one rule of every command that writes: never into the dataset.
+
+    ``out`` (a file or folder about to be written) may not be, or lie inside, one of
+    ``inputs`` (runs, dataset roots, run zips, calib folders; None entries are skipped), the
+    calib folder beside an input run, or any run folder at all (a folder holding a run's
+    sensor folders: ``lidar/``, ``imu/``, ``groundtruth/``, ``<radar>/adc_samples/``...); nor
+    be the dataset root that holds an input run (a folder inside that root, such as
+    ``root/processed``, is allowed). Call it after checking the inputs and before anything is
+    read or written.
+
+    Parameters
+    ----------
+    out
+        The output path, as given.
+    inputs
+        The input paths of the command, as given.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out`` as a path.
+
+    Raises
+    ------
+    WriteError
+        ``out`` is an input (arguments swapped) or lies inside one or inside a run; never a
+        suggestion to ``--overwrite`` it.
+    """
+    path = Path(out)
+    target = path.resolve()
+    for p, what in _protected(inputs):
+        if target == p:
+            raise WriteError(f"{path}: this is {what} the command reads, not an output; "
+                             "coloradar never writes into a dataset (are the arguments "
+                             "swapped? see --help)")
+        if _inside(target, p) and what != "the dataset root":
+            raise WriteError(f"{path}: lies inside {what} {p}; coloradar never writes into a "
+                             "dataset: choose an output outside it")
+    for folder in (target, *target.parents):
+        if folder.is_dir() and _has_run_marker(folder):
+            if folder == target:
+                raise WriteError(f"{path}: this is a ColoRadar run, not an output; coloradar "
+                                 "never writes into a dataset (are the arguments swapped? "
+                                 "see --help)")
+            raise WriteError(f"{path}: lies inside the ColoRadar run {folder}; coloradar never "
+                             "writes into a dataset: choose an output outside it")
+    return path
+
+
+def check_input(path: str | os.PathLike[str], expected: str = "a run folder or a run .zip"
+                ) -> None:
+    """Check an input path before any output (so that swapped arguments are said as a
+    missing or wrong input, never as an output that exists)."""
+    check_input_path(path, expected)
+
+
+def new_output_file(out: str, overwrite: bool,
+                    inputs: Iterable[str | os.PathLike[str] | None] = ()) -> Path:
+    """``out`` as a path, refusing a path inside the dataset (:func:`check_output_outside_dataset`
+    with ``inputs``) and an existing file unless ``overwrite`` (checked before any input is
+    read, so that a long command fails at once)."""
+    check_output_outside_dataset(out, inputs)
     return new_output_path(out, overwrite)
 
 
+def did_you_mean(name: str, names: Iterable[str]) -> str:
+    """``"did you mean pfa? "`` for the known ``names`` closest to a misspelt ``name``
+    (difflib), or ``""`` when none is close."""
+    names = list(names)
+    # "lidar" for "lidar/pointclouds": a known name it begins is as close as a misspelling.
+    starts = [n for n in names if name and n.startswith(name) and n != name]
+    close = list(dict.fromkeys(starts + difflib.get_close_matches(name, names, n=2,
+                                                                  cutoff=0.6)))[:2]
+    return f"did you mean {' or '.join(close)}? " if close else ""
+
+
+def is_run_folder_path(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a run folder of the dataset (it holds a recorded run's sensor
+    folders), without opening it."""
+    p = Path(path)
+    return p.is_dir() and _has_run_marker(p)
+
+
+def _setting_names() -> list[str]:
+    from dataclasses import fields
+
+    from ..dsp import ProcessingSettings
+
+    return [f.name for f in fields(ProcessingSettings) if f.name != "workers"]
+
+
 def processing_setting(text: str) -> tuple[str, object]:
-    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`."""
+    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`;
+    an unknown name is answered with the closest known ones (difflib)."""
     from ..dsp import ProcessingSettings  # dsp is heavy: only for the commands that parse it
 
     try:
         return ProcessingSettings.parse_setting(text)
     except ValueError as exc:
+        name, sep, _ = text.partition("=")
+        names = _setting_names()
+        if sep and name.strip() not in names:
+            hint = did_you_mean(name.strip(), names)
+            raise argparse.ArgumentTypeError(
+                f"unknown setting {name.strip()!r} in {text!r}; {hint}"
+                f"(settings: {', '.join(names)})") from None
         raise argparse.ArgumentTypeError(str(exc)) from None

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..dataset import open_sequence
 from ..progress import Progress
 from ._common import (
+    UsageError,
     add_file_output_args,
     add_quiet_arg,
+    check_input,
     new_output_file,
     non_negative_float,
     positive_float,
@@ -43,7 +46,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..viz import animate_run
 
-    out = new_output_file(args.out, args.overwrite)
+    check_input(args.run)
+    if Path(args.out).suffix.lower() not in (".mp4", ".gif", ".rrd"):
+        raise UsageError(f"--out {args.out}: expected a .mp4, .gif or .rrd file")
+    out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
     if out.suffix.lower() == ".rrd":
         from ..viz.rerun_log import log_run_rrd

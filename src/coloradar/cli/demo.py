@@ -32,8 +32,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..demo import is_demo_output, run_demo
     from ..progress import StageProgress
+    from ._common import check_output_outside_dataset
 
     out, overwrite = args.out, args.overwrite
+    if out is not None:
+        check_output_outside_dataset(out)
     if out is None:
         # The default folder is the demo's own scratch space: a rerun of the README's command
         # replaces what an earlier demo wrote there (and nothing else).

@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import json
+import warnings
+from pathlib import Path
 
+from ..errors import DataWarning
 from ..odometry import evaluate_odometry, format_evaluation, write_evaluation
 from ..odometry.metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
+from ._common import UsageError, check_input, check_output_outside_dataset
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,6 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "DIR/evaluation.png (with matplotlib).")
     p.add_argument("dir", help="output folder of 'coloradar odometry'")
     p.add_argument("--run", help="run folder or .zip (default: the one named in odometry.json)")
+    p.add_argument("--any-run", action="store_true",
+                   help="evaluate against --run even when odometry.json names another run")
     p.add_argument("--calib", help="calib folder or calib.zip (default: the odometry's)")
     p.add_argument("--align", choices=ALIGNMENTS, default="se3",
                    help="trajectory alignment before the ATE (default se3: Umeyama)")
@@ -38,7 +45,56 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _named_run(folder: str) -> tuple[str | None, str | None]:
+    """``(path, name)`` of the run that ``folder/odometry.json`` names (None when it names
+    none or cannot be read: evaluate_odometry says why then)."""
+    try:
+        info = json.loads((Path(folder) / "odometry.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None, None
+    if not isinstance(info, dict) or not info.get("run"):
+        return None, None
+    path = str(info["run"])
+    return path, str(info.get("run_name") or Path(path).name.removesuffix(".zip"))
+
+
+def _run_name(run: str) -> str:
+    return Path(run).resolve().name.removesuffix(".zip")
+
+
+def _check_time_overlap(folder: str, run: str | None, calib: str | None) -> None:
+    """Warn when the estimate's time span is not covered by the run's ground truth (a run
+    other than the estimate's, or a cut ground truth)."""
+    from ..dataset import open_sequence
+    from ..odometry.tum import read_tum
+
+    if run is None:
+        return
+    try:
+        est = read_tum(Path(folder) / "trajectory.txt").timestamps
+        gt = open_sequence(run, calib=calib).groundtruth.timestamps
+    except Exception:  # evaluate_odometry says what is wrong, with its own message
+        return
+    if len(est) < 2 or len(gt) < 2:
+        return
+    span = float(est[-1] - est[0])
+    overlap = min(float(est[-1]), float(gt[-1])) - max(float(est[0]), float(gt[0]))
+    if overlap < span:
+        warnings.warn(f"{folder}: the estimate spans {span:.1f} s but only "
+                      f"{max(overlap, 0.0):.1f} s of it lie within the ground truth of {run}; "
+                      "the figures cover that part only", DataWarning, stacklevel=2)
+
+
 def run(args: argparse.Namespace) -> int:
+    named_path, named = _named_run(args.dir)
+    if args.run is not None:
+        check_input(args.run)
+        if named is not None and _run_name(args.run) != named and not args.any_run:
+            raise UsageError(f"--run {args.run}: {args.dir}/odometry.json names the run {named}; "
+                             "against another run's ground truth the figures mean nothing "
+                             "(pass --any-run to insist)")
+    check_output_outside_dataset(args.dir, (args.run or named_path, args.calib))
+    _check_time_overlap(args.dir, args.run or named_path, args.calib)
     ev = evaluate_odometry(args.dir, args.run, calib=args.calib, align=args.align,
                            distances=tuple(args.distances), rpe_pairing=args.rpe_pairing,
                            drift_lengths=tuple(args.drift_lengths))

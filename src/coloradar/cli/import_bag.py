@@ -7,6 +7,7 @@ import argparse
 from ..interop.bag_import import import_bag, iter_topics, parse_field_map, parse_topic_map
 from ..interop.ros_messages import DEFAULT_TOPICS
 from ..progress import Progress
+from ._common import check_output_outside_dataset
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None:
         args.import_parser.error("the following arguments are required: OUT (the dataset root "
                                  "to import into; or --list)")
+    check_output_outside_dataset(args.out, (args.bag,))  # a new run beside others only
     topics = parse_topic_map(args.topic) if args.topic else None
     fields = parse_field_map(args.field)
     prog = Progress(0, "import", unit="messages", enabled=not args.quiet)

@@ -12,32 +12,60 @@ import warnings
 
 from .. import __version__
 from ..errors import ColoradarError
-from ._common import UsageError, cli_wording
+from ..progress import interrupt_handling
+from ._common import UsageError, cli_wording, did_you_mean
 
 __all__ = ["build_parser", "main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with every sub-command of this package registered."""
+def _new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
     parser = argparse.ArgumentParser(
         prog="coloradar",
         description="Read, process, simulate and evaluate ColoRadar radar data.")
     parser.add_argument("--version", action="version", version=f"coloradar {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    return parser, parser.add_subparsers(dest="command", metavar="COMMAND")
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser with every sub-command of this package registered; with
+    ``command``, only the module of that name when it registers that command (the others'
+    imports, numba's and scipy.stats' among them, cost seconds a command does not need)."""
+    parser, sub = _new_parser()
     from . import __path__ as pkg_path
 
-    for mod in sorted(m.name for m in pkgutil.iter_modules(pkg_path)):
-        if mod.startswith("_") or mod == "main":
-            continue
+    mods = sorted(m.name for m in pkgutil.iter_modules(pkg_path)
+                  if not m.name.startswith("_") and m.name != "main")
+    name = command.replace("-", "_") if command else None
+    if name in mods:
+        module = importlib.import_module(f"{__package__}.{name}")
+        if hasattr(module, "register"):
+            module.register(sub)
+            if command in sub.choices:
+                return parser
+        parser, sub = _new_parser()  # the module registers another command: all of them
+    for mod in mods:
         module = importlib.import_module(f"{__package__}.{mod}")
         if hasattr(module, "register"):
             module.register(sub)
     return parser
 
 
+def _commands(parser: argparse.ArgumentParser) -> list[str]:
+    return [name for action in parser._subparsers._group_actions
+            for name in getattr(action, "choices", None) or ()] if parser._subparsers else []
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (0 ok, 1 data error, 2 usage error)."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = argv[0] if argv and not argv[0].startswith("-") else None
+    parser = build_parser(command)
+    choices = _commands(parser)
+    if command is not None and command not in choices:
+        hint = did_you_mean(command, choices)
+        print(f"coloradar: error: unknown command {command!r}; {hint}(commands: "
+              f"{', '.join(choices)}; see: coloradar --help)", file=sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
@@ -46,7 +74,9 @@ def main(argv: list[str] | None = None) -> int:
     warnings.simplefilter("once")
     warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {cli_wording(str(msg))}\n"
     try:
-        code = int(args.func(args) or 0)
+        # Ctrl-C stops every command within a unit of work, even where Python would swallow it.
+        with interrupt_handling():
+            code = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler below
         return code
     except BrokenPipeError:

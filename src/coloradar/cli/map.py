@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..dataset import open_sequence
 from ..geometry import MAP_SOURCES, build_map, write_point_file
@@ -12,6 +13,7 @@ from ..progress import Progress
 from ._common import (
     add_file_output_args,
     add_quiet_arg,
+    check_input,
     new_output_file,
     non_negative_float,
     positive_float,
@@ -47,8 +49,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _points_source(args: argparse.Namespace, points_from: str) -> str:
+    """Where a radar map's points came from, said in the summary (with --products, whether
+    the processed folder or the run gave them)."""
+    if args.sensor == "lidar":
+        return ""
+    processed = args.products is not None and (
+        Path(args.products) / args.sensor / "pointclouds").is_dir()
+    if points_from == "adc":
+        return ", points computed from their ADC" + (
+            f" (none in {args.products})" if args.products else "")
+    if processed:
+        return f", points from {Path(args.products) / args.sensor / 'pointclouds'}"
+    return ", the run's own point clouds" + (
+        f" (none in {args.products})" if args.products else "")
+
+
 def run(args: argparse.Namespace) -> int:
-    out = new_output_file(str(check_point_file_name(args.out)), args.overwrite)
+    check_input(args.run)
+    out = new_output_file(str(check_point_file_name(args.out)), args.overwrite,
+                          inputs=(args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib, products=args.products)
     m = build_map(seq, args.sensor, start=args.start, duration=args.duration,
                   voxel_size=args.voxel, stride=args.stride, max_range=args.max_range,
@@ -56,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
                   progress=Progress(0, f"{args.sensor} frames", enabled=not args.quiet))
     write_point_file(out, m.points, m.fields, binary=not args.ascii, overwrite=args.overwrite)
     if not args.quiet:
-        src = ", points computed from their ADC" if m.points_from == "adc" else ""
+        src = _points_source(args, m.points_from)
         print(f"{out}: {len(m.points):,} points from {m.frame_indices.size} {args.sensor} "
               f"frames{src} ({', '.join(m.fields)}, world frame)", file=sys.stdout)
     # Said every time (the CalibrationWarning shows once, when the calibration is loaded).

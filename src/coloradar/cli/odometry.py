@@ -19,6 +19,7 @@ from ..odometry import (
 )
 from ..odometry.rio import RioConfig
 from ..progress import Progress
+from ._common import check_output_outside_dataset
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -85,6 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output_outside_dataset(args.out, (args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
     overrides = {}
     if args.threshold is not None:

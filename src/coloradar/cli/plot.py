@@ -6,7 +6,37 @@ import argparse
 
 from ..calib import RADARS
 from ..dataset import open_sequence
-from ._common import add_file_output_args, add_quiet_arg, positive_float, positive_int
+from ._common import (
+    add_file_output_args,
+    add_quiet_arg,
+    check_input,
+    check_output_outside_dataset,
+    positive_float,
+    positive_int,
+)
+
+
+def _frame_index(seq, args: argparse.Namespace) -> int:
+    """``--frame`` as a position from the start: -1 is the last frame of the stream it
+    counts in, and the picture and the message say its real number (out of range: left as
+    given, for the view's own error)."""
+    if args.frame >= 0:
+        return args.frame
+    from ..viz.scene import REFERENCE_STREAMS, _has, _stream, radar_source
+
+    if args.view == "scene":
+        name = args.stream or (radar_source(seq, args.radar) if args.radar else
+                               next((s for s in REFERENCE_STREAMS if _has(seq, s)), None))
+    else:
+        radar = args.radar or "cascade"
+        has_adc = _has(seq, f"{radar}/adc")
+        use_hm = _has(seq, f"{radar}/heatmaps") and (
+            args.view == "heatmap" or (args.view == "range-azimuth" and not has_adc))
+        name = f"{radar}/heatmaps" if use_hm else f"{radar}/adc" if has_adc else None
+    if name is None or not _has(seq, name):
+        return args.frame
+    n = len(_stream(seq, name).timestamps)
+    return args.frame + n if -n <= args.frame else args.frame
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,8 +78,11 @@ def run(args: argparse.Namespace) -> int:
     from ..viz import frame_figure, save_figure
     from ..viz._figure import check_image_path
 
+    check_input(args.run)
+    check_output_outside_dataset(args.out, (args.run, args.calib))
     out = check_image_path(args.out, args.overwrite)
     seq = open_sequence(args.run, calib=args.calib)
+    args.frame = _frame_index(seq, args)
     fig = frame_figure(seq, args.view, args.frame, radar=args.radar, coords=args.coords,
                        scene_view=args.scene_view, stream=args.stream, extent=args.extent,
                        heatmap_slice=args.slice, polar=args.polar, max_range=args.max_range)

@@ -11,7 +11,14 @@ from ..batch.driver import DEFAULT_CHUNK_SIZE, process
 from ..batch.output_folder import PRODUCTS
 from ..dsp import ProcessingSettings
 from ..formats.source import check_input_path
-from ._common import UsageError, add_executor_args, executor_from_args, positive_int, processing_setting
+from ._common import (
+    UsageError,
+    add_executor_args,
+    check_output_outside_dataset,
+    executor_from_args,
+    positive_int,
+    processing_setting,
+)
 from .calibrate import coupling_calibration
 
 
@@ -96,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise UsageError(f"--set: {exc}") from None
     check_input_path(args.path, "a run folder, a run .zip or a dataset root folder")
+    check_output_outside_dataset(args.out, (args.path, args.calib))
     try:
         calib = coupling_calibration(args.path, args.calib, args.coupling) if args.coupling else args.calib
         report = process(args.path, args.out, runs=args.runs, calib=calib,

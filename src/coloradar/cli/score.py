@@ -4,9 +4,17 @@ from __future__ import annotations
 
 import argparse
 
+from ..formats.atomic import new_output_path
 from ..learning.scoring import PREDICTION_SUFFIXES, format_score_report, score_folder, write_score_report
 from ..learning.targets import TargetSettings
 from ..progress import Progress
+from ._common import (
+    UsageError,
+    check_input,
+    check_output_outside_dataset,
+    is_run_folder_path,
+    positive_int,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,7 +37,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--voxel-size", type=float, default=0.1,
                    help="lidar map voxel in m (run folders; default 0.1)")
     p.add_argument("--min-hits", type=int, default=1, help="scans that must hit a map voxel")
-    p.add_argument("--bin-columns", type=int, default=3, help="float32 values per row of .bin files")
+    p.add_argument("--bin-columns", type=positive_int, default=None,
+                   help="float32 values per row of .bin files (default: by the file's kind: 5 "
+                        "for radar_pointcloud_<i>.bin, what 'coloradar process' writes; 4 for "
+                        "lidar_pointcloud_<i>.bin; 3 for any other name)")
     p.add_argument("--out", help="also write per-frame scores to this .json file")
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
@@ -38,6 +49,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if is_run_folder_path(args.pred_dir):
+        raise UsageError(f"{args.pred_dir}: this is a ColoRadar run, not a folder of predicted "
+                         "clouds (are the arguments swapped? PRED_DIR comes first)")
+    if not args.run.lower().endswith((".h5", ".hdf5")):
+        check_input(args.run, "a run folder or .zip, or an exported .h5 file")
+    if args.out:
+        check_output_outside_dataset(args.out, (args.run, args.calib))
+        new_output_path(args.out, args.overwrite)  # before the scoring, not after it
     settings = TargetSettings(voxel_size=args.voxel_size, min_hits=args.min_hits)
     prog = Progress(0, "score", unit="frames", enabled=not args.quiet)
     report = score_folder(args.pred_dir, args.run, radar=args.radar, threshold=args.threshold,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import OutputExistsError
 from ..progress import StageProgress
-from ._common import UsageError, positive_float
+from ._common import UsageError, check_output_outside_dataset, positive_float
 
 __all__ = ["register", "run"]
 
@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from ..sim.run import SENSOR_CHOICES, resolve_scene, simulate_run
 
     if args.write_scene is not None:
+        check_output_outside_dataset(args.write_scene)
         if args.write_scene.exists() and not args.overwrite:
             raise OutputExistsError(f"{args.write_scene}: exists; pass --overwrite to replace it")
         atomic_write_text(args.write_scene, resolve_scene(args.scene).to_json())
@@ -77,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
     if args.out is None:
         raise UsageError("give an output folder OUT (or --write-scene FILE)")
+    check_output_outside_dataset(args.out)  # a new run beside others, never inside one
     sensors: list[str] | None = [s.strip() for s in args.sensors.split(",") if s.strip()]
     if args.sensors == ",".join(SENSOR_CHOICES):
         sensors = None                  # the default: every sensor of the layout

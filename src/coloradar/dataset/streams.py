@@ -325,9 +325,11 @@ def open_frame_stream(name: str, src: Source, folder: str, data_dir: str, prefix
     for msg in faults:
         warnings.warn(f"{src.describe(ts_rel)}, {msg}", DataWarning, stacklevel=3)
     faults = [f"{src.describe(ts_rel)}, {msg}" for msg in faults]
-    if ids_arr.size != ts.size or not has.all():
-        n_no_file = int((~has).sum())
-        n_no_ts = int(ids_arr.size - has.sum())
+    # A nan line without a file is a frame that produced nothing (the rule of processed
+    # output, docs/batch.md): the line and the folder agree, nothing to warn about.
+    n_no_file = int((~has & np.isfinite(ts)).sum())
+    n_no_ts = int(ids_arr.size - has.sum())
+    if n_no_file or n_no_ts:
         issues.append(f"{ts.size} timestamps but {ids_arr.size} frame files: "
                       f"{n_no_file} timestamps have no file, {n_no_ts} files have no timestamp; "
                       f"using the {int(has.sum())} frames that have both")

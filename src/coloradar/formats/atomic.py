@@ -5,17 +5,19 @@ from __future__ import annotations
 import os
 import re
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import ColoradarError, OutputExistsError, WriteError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "clean_partial_files", "default_file_mode",
+__all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_text", "clean_partial_files",
+           "default_file_mode",
            "is_partial_file", "make_output_dir", "new_output_path", "output_dir_error",
            "write_text_if_changed"]
 
 # atomic_write_bytes's temporary names: ".<final name>.<random>.tmp"
-_PARTIAL_RE = re.compile(r"^\..+\.tmp$")
+_PARTIAL_RE = re.compile(r"^\..+\.tmp(\.\w+)?$")
 
 
 def _read_umask() -> int:
@@ -57,6 +59,41 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes | memoryview) -
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError) and not isinstance(exc, ColoradarError):
+            raise _write_error(path, exc) from None
+        raise
+
+
+@contextmanager
+def atomic_output(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
+    """A temporary path beside ``path`` for a writer that needs a file name (HDF5, a video, a
+    Rerun recording), renamed to ``path`` when the block ends without an exception; removed
+    otherwise (Ctrl-C included).
+
+    The file gets the mode a plain ``open`` would give (:func:`default_file_mode`), not
+    ``mkstemp``'s 0o600. The temporary name is ``.<name>.<random>.tmp<suffix>``, recognised by
+    :func:`is_partial_file` (``suffix``: for writers that choose their format by it).
+
+    Raises
+    ------
+    WriteError
+        The folder cannot be created, or the file cannot be written or renamed.
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}",
+                                    dir=path.parent)
+        os.close(fd)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
+    tmp = Path(name)
+    try:
+        yield tmp
+        os.chmod(tmp, default_file_mode())
+        os.replace(tmp, path)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
         if isinstance(exc, OSError) and not isinstance(exc, ColoradarError):
             raise _write_error(path, exc) from None
         raise

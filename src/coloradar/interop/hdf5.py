@@ -46,7 +46,7 @@ from .._version import __version__
 from ..calib import write_calibration
 from ..dataset import Sequence, open_sequence
 from ..errors import FormatError, MissingDataError, WriteError
-from ..formats.atomic import default_file_mode, new_output_path
+from ..formats.atomic import atomic_output, new_output_path
 from ..learning.h5_file import _RAGGED, _SCALARS, DESCRIPTIONS, FORMAT, FORMAT_VERSION, H5Run, _h5py
 from ..learning.samples import SyncedSamples
 from ..learning.targets import TargetSettings
@@ -104,7 +104,7 @@ class Hdf5Export:
     target_settings: TargetSettings | None = None
     views: ViewOptions | None = None
     compression: str = "gzip"
-    compression_level: int = 4
+    compression_level: int = 1
     pose_source: str = "groundtruth"
     calib: Any = None
     overwrite: bool = False
@@ -132,7 +132,8 @@ def export_hdf5(source: Sequence | str | os.PathLike[str], out: str | os.PathLik
         ``"gzip"`` (portable: every HDF5 reader has it), ``"lzf"`` (faster, h5py only) or
         ``"none"``.
     compression_level
-        gzip level 1–9.
+        gzip level 1–9 (default 1: about twice as fast to write as level 4 for 2–3 % more
+        bytes, benchmarks/bench_learning.py).
     calib
         Calibration for a run given as a path (None: found beside it).
     overwrite
@@ -166,22 +167,16 @@ def export_hdf5(source: Sequence | str | os.PathLike[str], out: str | os.PathLik
                 "shuffle": True}
     elif o.compression == "lzf":
         comp = {"compression": "lzf", "shuffle": True}
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    if o.progress is not None:
+        o.progress(0, len(view))  # said at once: the first sample may fuse the lidar map first
     try:
-        with h5py.File(tmp, "w") as f:
+        with atomic_output(out) as tmp, h5py.File(tmp, "w") as f:
             _write_attributes(f, seq, view, o)
             shapes = _write_samples(f, view, comp, o.progress)
-        os.chmod(tmp, default_file_mode())
-        os.replace(tmp, out)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
+        if isinstance(exc, WriteError):
+            raise
         raise WriteError(f"{out}: cannot write the HDF5 file ({exc})") from exc
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return Hdf5ExportResult(out, len(view), out.stat().st_size, time.perf_counter() - t0, shapes,
                             dict(view.dropped))
 

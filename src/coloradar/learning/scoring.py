@@ -6,7 +6,10 @@ in the radar frame's file name (``frame_id``: ``12.npy``, ``pred_000012.pcd`` an
 
 * ``.npy``: float ``(N, ≥3)``, x y z first;
 * ``.pcd`` / ``.ply``: fields x y z first (:func:`coloradar.geometry.read_point_file`);
-* ``.bin``: float32 rows of ``bin_columns`` values, x y z first (KITTI-style; 3 by default).
+* ``.bin``: float32 rows, x y z first: coloradar's own point clouds by their kind
+  (``radar_pointcloud_<i>.bin``, what ``coloradar process`` writes: 5 values a row;
+  ``lidar_pointcloud_<i>.bin``: 4), any other name ``bin_columns`` values a row (KITTI-style,
+  3 by default). Every file's size is checked against its row length before any is scored.
 
 The targets are the samples' ``lidar_target`` of a run folder (the run's lidar map is fused
 first) or of an exported ``.h5`` file that holds them.
@@ -36,10 +39,46 @@ __all__ = ["PREDICTION_SUFFIXES", "ScoreReport", "format_score_report", "read_pr
            "score_folder", "write_score_report"]
 
 PREDICTION_SUFFIXES = (".npy", ".pcd", ".ply", ".bin")
+# Columns of the .bin files whose kind the name says (coloradar.formats.binary), and names of
+# .bin files that are not point clouds at all.
+_BIN_KINDS = {"radar_pointcloud": 5, "lidar_pointcloud": 4}
+_NOT_POINTS = {"heatmap": "a heatmap", "frame": "a raw ADC frame"}
 _TRAILING_INT = re.compile(r"(\d+)(?!.*\d)")
 
 
-def read_prediction(path: str | os.PathLike[str], bin_columns: int = 3) -> np.ndarray:
+def bin_columns_of(path: str | os.PathLike[str], bin_columns: int | None = None) -> int:
+    """Float32 values per row of a ``.bin`` prediction file: 5 for ``radar_pointcloud_<i>.bin``,
+    4 for ``lidar_pointcloud_<i>.bin`` (the dataset's kinds), else ``bin_columns`` (None: 3).
+
+    Raises
+    ------
+    FormatError
+        The name is that of a coloradar file that is not a point cloud (a heatmap, an ADC
+        frame).
+    SettingsError
+        ``bin_columns`` contradicts the kind the name says.
+    """
+    p = Path(path)
+    prefix = _TRAILING_INT.sub("", p.stem).rstrip("_")
+    if prefix in _NOT_POINTS:
+        raise FormatError(f"{p}: {_NOT_POINTS[prefix]} (by its name), not a point cloud")
+    kind = _BIN_KINDS.get(prefix)
+    if kind is not None and bin_columns is not None and bin_columns != kind:
+        raise SettingsError(f"{p}: a {prefix.replace('_', ' ')} file has {kind} values a row, "
+                            f"not {bin_columns} (--bin-columns)")
+    return kind or bin_columns or 3
+
+
+def _check_bin_size(p: Path, columns: int) -> None:
+    size = p.stat().st_size
+    if size % (4 * columns):
+        raise FormatError(f"{p}: {size:,} bytes is not a whole number of rows of {columns} "
+                          f"float32 values ({4 * columns} bytes); expected x y z first"
+                          + ("" if p.stem.startswith(tuple(_BIN_KINDS)) else
+                             " (pass the right --bin-columns)"))
+
+
+def read_prediction(path: str | os.PathLike[str], bin_columns: int | None = None) -> np.ndarray:
     """Points of one prediction file, float64 ``(N, 3)`` (see the module docstring)."""
     p = Path(path)
     suffix = p.suffix.lower()
@@ -51,11 +90,9 @@ def read_prediction(path: str | os.PathLike[str], bin_columns: int = 3) -> np.nd
     elif suffix in (".pcd", ".ply"):
         a = read_point_file(p)[0]
     elif suffix == ".bin":
-        raw = np.fromfile(p, dtype="<f4")
-        if raw.size % bin_columns:
-            raise FormatError(f"{p}: {raw.size} float32 values is not a whole number of rows of "
-                              f"{bin_columns} (pass the right --bin-columns)")
-        a = raw.reshape(-1, bin_columns)
+        columns = bin_columns_of(p, bin_columns)
+        _check_bin_size(p, columns)
+        a = np.fromfile(p, dtype="<f4").reshape(-1, columns)
     else:
         raise FormatError(f"{p}: unknown prediction file type; expected one of "
                           f"{', '.join(PREDICTION_SUFFIXES)}")
@@ -123,7 +160,7 @@ def _predictions(folder: Path) -> dict[int, Path]:
 
 def score_folder(pred_dir: str | os.PathLike[str], source: Any, *, radar: str = "cascade",
                  threshold: float = 0.2, grid: BevGrid | None = None, cell: float = 0.1,
-                 bin_columns: int = 3,
+                 bin_columns: int | None = None,
                  target_settings: TargetSettings | None = None, calib: Any = None,
                  progress: Any = None) -> ScoreReport:
     """Score every prediction file of ``pred_dir`` against the lidar target of its frame.
@@ -142,13 +179,17 @@ def score_folder(pred_dir: str | os.PathLike[str], source: Any, *, radar: str = 
         BEV grid of the occupancy scores (default: :meth:`BevGrid.for_radar` with ``cell``
         metres); only cells inside the radar's field of view are scored.
     bin_columns
-        Values per row of ``.bin`` files.
+        Values per row of ``.bin`` files whose name does not say their kind (None: 3); every
+        ``.bin`` file's size is checked before anything is scored.
     target_settings
         How a run folder's targets are made.
     progress
         ``progress(done, total)`` after each frame.
     """
     preds = _predictions(Path(pred_dir))
+    for p in preds.values():  # a file that cannot be read right fails before any score
+        if p.suffix.lower() == ".bin":
+            _check_bin_size(p, bin_columns_of(p, bin_columns))
     is_file = isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".h5", ".hdf5")
     view = SyncedSamples(source, radar=None if is_file else radar,
                          products=None if is_file else ("heatmap",), lidar=False, targets=True,

@@ -17,14 +17,13 @@ so Rerun composes the transforms and every point lands in the world frame at its
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import MissingDependencyError
-from ..formats.atomic import make_output_dir, new_output_path
+from ..formats.atomic import atomic_output, new_output_path
 from ..geometry import sensor_to_base, trajectory_from_groundtruth, window_indices
 from .scene import RADAR_STREAMS, _has, _run_start, _stream, radar_points, radar_source
 
@@ -86,11 +85,10 @@ def log_run_rrd(seq, out: str | os.PathLike[str], *, start: float = 0.0,
         frames += [(float(ts[i]), sensor, name, int(i)) for i in idx]
     frames.sort()
 
-    make_output_dir(out.parent)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=".tmp.rrd", dir=out.parent)
-    os.close(fd)
     rec = rr.RecordingStream("coloradar", recording_id=seq.name)
-    try:
+    # Renamed to out only when complete, with the mode a plain open gives (not mkstemp's 0600).
+    with atomic_output(out, ".rrd") as tmp_path:
+        tmp = str(tmp_path)
         rec.save(tmp)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         gt_keep = window_indices(traj.timestamps, t0, t1)
@@ -123,8 +121,4 @@ def log_run_rrd(seq, out: str | os.PathLike[str], *, start: float = 0.0,
                 progress(k + 1, len(frames))
         rec.flush()
         rec.disconnect()
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return out
