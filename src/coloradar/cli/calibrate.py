@@ -6,13 +6,12 @@ from __future__ import annotations
 import argparse
 import os
 import warnings
-from pathlib import Path
 
 import numpy as np
 
 from ..calib import Calibration, load_calibration, with_coupling, write_coupling_calib
 from ..dataset import open_dataset, open_sequence
-from ..errors import ColoradarError, DataWarning, MissingDataError
+from ..errors import DataWarning, MissingDataError
 from ..formats.source import check_input_path
 from ..geometry import rig_velocity, trajectory_from_groundtruth
 from ..progress import Progress
@@ -62,26 +61,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=run)
 
 
-def _inside(path: Path, folder: Path) -> bool:
-    return path == folder or folder in path.parents
-
-
-def check_outside_dataset(out: Path, run: str | os.PathLike[str], calib_source: str) -> None:
-    """Refuse an output file inside the run, inside the calibration it was read with, or inside
-    the dataset root holding the run (a folder with ``calib/`` or ``calib.zip``)."""
-    o, r = out.resolve(), Path(run).resolve()
-    places = [r]
-    if calib_source not in ("preset", "presets", "") and Path(calib_source).exists():
-        places.append(Path(calib_source).resolve())
-    parent = r.parent
-    if (parent / "calib").exists() or (parent / "calib.zip").exists():
-        places.append(parent)
-    for folder in places:
-        if _inside(o, folder):
-            raise ColoradarError(f"{out}: lies inside the dataset ({folder}); coloradar never "
-                                 "writes into a dataset: choose a file outside it")
-
-
 def moving_frames(seq, radar: str, times: np.ndarray, min_speed: float) -> np.ndarray:
     """bool ``(N,)``: frames at ``times`` in which the radar's origin moves at least
     ``min_speed`` [m/s] by the run's ground truth (all True with ``min_speed`` 0, or with a
@@ -113,10 +92,9 @@ def _frames(stream, positions: list[int]):
 def run(args: argparse.Namespace) -> int:
     from ..dsp.coupling_estimate import estimate_coupling  # dsp is heavy: only when run
 
-    out = new_output_file(args.out, args.overwrite)
     check_input_path(args.run, "a run folder or a run .zip")
+    out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
-    check_outside_dataset(out, args.run, seq.calib.source)
     rc = seq.calib.radar(args.radar)
     stream = seq.radar(args.radar).adc
     n = len(stream)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..capture import import_capture
+from ._common import check_output_outside_dataset
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,6 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output_outside_dataset(args.out, (args.capture, args.config))
     res = import_capture(
         args.capture, args.out, config=args.config, board=args.board,
         start_time=args.start_time, iq_order=args.iq_order, lanes=args.lanes,
