@@ -40,7 +40,9 @@ def _copy_package(dst: Path, blocked_pycache: bool) -> Path:
     if blocked_pycache:
         # a *file* named __pycache__ beside the kernels: numba cannot make its in-tree cache
         # there even as root (for whom a read-only mode bit would not stop writes)
-        (root / "coloradar" / "dsp" / "__pycache__").write_text("")
+        # (in every folder that holds kernels: the package coloradar/dsp/_kernels)
+        for folder in (root / "coloradar" / "dsp", root / "coloradar" / "dsp" / "_kernels"):
+            (folder / "__pycache__").write_text("")
         for p in [*sorted(root.rglob("*"), reverse=True), root]:
             p.chmod(p.stat().st_mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
     return root

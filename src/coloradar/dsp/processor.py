@@ -52,12 +52,13 @@ from .array import (
 )
 from .cfar import (
     CFAR_KINDS,
+    CFARConfig,
     CFAREdge,
     CFARKind,
-    cfar,
     cfar_window,
     effective_train_cells,
     power_correlation,
+    run_cfar,
 )
 from .cube import coupling_signal, phase_frequency_factors, signed_doppler_bins
 from .detect import (
@@ -824,9 +825,9 @@ class RadarProcessor:
         # DC removal notches the first range bins (the window spreads the notch): they would
         # lower the noise estimate of their neighbours, so the CFAR map starts after them.
         r0 = max(0, min(self._notch_bins, stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
-        res = cfar(stat[:, r0:], s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
-                   rank=s.cfar_rank, looks=looks, mode=cmodes, split_axis=1,
-                   cell_factor=self._cell_factor, excise=s.cfar_excision)
+        res = run_cfar(stat[:, r0:], CFARConfig(s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
+                                                s.cfar_rank, looks, cmodes, 1, self._cell_factor,
+                                                s.cfar_excision))
         mask = np.zeros(stat.shape, dtype=bool)
         mask[:, r0:] = res.detections
         noise = np.full(stat.shape, np.inf)
