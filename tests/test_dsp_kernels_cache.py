@@ -29,7 +29,7 @@ adc = (g.standard_normal(calib.frame_shape) + 1j * g.standard_normal(calib.frame
 proc = RadarProcessor(calib)
 fast, ref = proc.heatmap(adc), RadarProcessor(calib, engine="numpy").heatmap(adc)
 assert np.allclose(fast[..., 0], ref[..., 0], rtol=2e-4, atol=0), "heatmaps differ"
-print("engine", proc._engine)
+print("engine", proc.cube.engine)
 """
 
 
