@@ -135,16 +135,20 @@ class CFARStage:
             # Cells that peak along Doppler or along range: a target one bin from a stronger
             # one (in the other axis) is no 2D maximum of the summed power, but it is one of
             # its own beam; the beam test of the guard stage decides (docs/dsp.md, "Grouping").
-            if self.compiled is not None:
-                grouped = np.empty(stat.shape, dtype=bool)
-                self.compiled.group_peaks(
-                    np.ascontiguousarray(stat), np.ascontiguousarray(mask),
-                    np.ascontiguousarray(noise), f64(nxt if nxt is not None else np.zeros(0)),
-                    float(STRONG_NEIGHBOUR), grouped)
-                mask = grouped
-            else:
-                mask = group_peaks(stat, mask, noise, nxt)
+            mask = self.group(stat, mask, noise, nxt)
         return CFARCells(stat, mask, noise, plain_at, sig2, nxt)
+
+    def group(self, stat: np.ndarray, mask: np.ndarray, noise: np.ndarray,
+              nxt: np.ndarray | None) -> np.ndarray:
+        """:func:`group_peaks`, compiled with the numba engine."""
+        if self.compiled is None:
+            return group_peaks(stat, mask, noise, nxt)
+        grouped = np.empty(stat.shape, dtype=bool)
+        self.compiled.group_peaks(
+            np.ascontiguousarray(stat), np.ascontiguousarray(mask),
+            np.ascontiguousarray(noise), f64(nxt if nxt is not None else np.zeros(0)),
+            float(STRONG_NEIGHBOUR), grouped)
+        return grouped
 
     def statistic(self, rd: np.ndarray
                        ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray], int,
