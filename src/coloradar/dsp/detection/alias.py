@@ -59,7 +59,7 @@ class AliasStage:
         self.penalty = float(np.log(beams.row_sel.sum() / angle_pfa))
 
     def choose(self, vecs: np.ndarray, k_signed: np.ndarray,
-                      noise: np.ndarray | None = None
+               noise: np.ndarray | None = None
                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Best Doppler alias per detection (:mod:`coloradar.dsp.tdm`); the second value is
         None (kept for callers).

@@ -126,7 +126,7 @@ class Beams:
         return ci[:n], ia[:n]
 
     def focused(self, x: np.ndarray, uy: np.ndarray, uz: np.ndarray, rho: np.ndarray,
-                 rows: bool = True, copy: bool = True) -> np.ndarray:
+                rows: bool = True, copy: bool = True) -> np.ndarray:
         """``x`` times the near-field focusing phases (:meth:`NearField.focus_sines`) at sines
         ``(uy, uz)`` and ranges ``rho`` (``(K,)`` each); ``x`` complex ``(K, M)`` with
         ``rows``, else ``(M, K)``; ``copy=False`` may multiply ``x`` (complex64) in place.

@@ -162,7 +162,7 @@ class CFARStage:
         if self.compiled is not None:
             mag2 = np.empty((ntx * nrx, nd * nr), dtype=np.float32)
             self.compiled.power(c64(rd).reshape(-1).view(np.float32),
-                                          mag2.reshape(-1))
+                                mag2.reshape(-1))
         else:
             mag2 = np.abs(rd).reshape(ntx * nrx, nd * nr)
             np.square(mag2, out=mag2)
@@ -228,7 +228,7 @@ class CFARStage:
 
 
 def group_peaks(stat: np.ndarray, mask: np.ndarray, noise: np.ndarray,
-                 nxt: np.ndarray | None) -> np.ndarray:
+                nxt: np.ndarray | None) -> np.ndarray:
     """The detection mask after peak grouping (numpy; :func:`~coloradar.dsp._kernels.group_peaks`
     is the compiled one): CFAR cells ``mask`` that are maxima of their 3 × 3 neighbourhood of
     ``stat`` ``(doppler, range)`` (Doppler wrapped; the bin after the last range bin,

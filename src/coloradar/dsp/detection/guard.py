@@ -112,8 +112,8 @@ class GuardStage:
         return keep, nb
 
     def beam_neighbourhood(self, rd: np.ndarray, d: np.ndarray, r: np.ndarray,
-                            alias: np.ndarray | None, steer: np.ndarray,
-                            rd_next: np.ndarray | None = None) -> np.ndarray:
+                           alias: np.ndarray | None, steer: np.ndarray,
+                           rd_next: np.ndarray | None = None) -> np.ndarray:
         """Bartlett beam power at each point's direction in the 3 × 3 range–Doppler cells
         around its cell: float64 ``(P, 3, 3)`` [Doppler offset −1..1, range offset −1..1].
 

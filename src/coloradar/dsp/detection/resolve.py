@@ -226,7 +226,7 @@ class ResolveStage:
 
     @staticmethod
     def join_lone(lone: tuple[np.ndarray, ...] | None, uy: np.ndarray, uz: np.ndarray,
-                   peak: np.ndarray, w: np.ndarray, ci: np.ndarray
+                  peak: np.ndarray, w: np.ndarray, ci: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The cells with one source (``lone``: their ``uy, uz, peak, w, ci``) back among
         the others, in cell order."""
@@ -289,11 +289,11 @@ class ResolveStage:
             deferred[keep])
         if deferred.any():
             uz[deferred], peak[deferred] = self.beams.elevation_search(x[deferred], uy[deferred],
-                                                                  rho[deferred])
+                                                                       rho[deferred])
         return uy, uz, peak, ci, x, rho, primary, wp
 
     def residual_floor(self, x: np.ndarray, w: np.ndarray, amps: np.ndarray,
-                        cell_of: np.ndarray, starts: np.ndarray) -> np.ndarray:
+                       cell_of: np.ndarray, starts: np.ndarray) -> np.ndarray:
         """Power a source of a cell must reach against what the cell's joint fit leaves.
 
         The generalised likelihood-ratio test of one more source when the noise level is
@@ -324,7 +324,7 @@ class ResolveStage:
         return (self.f_threshold[nu] * rss / nu / m)[cell_of]
 
     def joint_amplitudes(self, x: np.ndarray, w: np.ndarray, cell_of: np.ndarray,
-                          rank: np.ndarray) -> np.ndarray:
+                         rank: np.ndarray) -> np.ndarray:
         """Least-squares amplitudes of every cell's sources, batched: the sources of a cell
         are the columns ``conj(w)`` of its peaks; ``x`` the cell's vector per peak. A cell
         with one source gets its beam value; only cells with several are solved."""
