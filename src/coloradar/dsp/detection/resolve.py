@@ -173,11 +173,7 @@ class ResolveStage:
             j = np.empty(ci.size, dtype=np.int64)
             k = kb["k"].joint_residuals(xc, w, starts, alive, count, xp, j)
             xp, j = xp[:k], j[:k]
-            # elevation afresh on what is left (two sources fool the sparse rows)
-            uz[j], _ = self.beams.elevation_search(xp, uy[j], rho[j])
-            if self.refine:
-                uy[j], uz[j], _ = self.beams.newton(xp, uy[j], uz[j], rho[j])
-            w[:, j] = self.beams.steer(uy[j], uz[j], rho[j])
+            self._refine_apart(xp, j, uy, uz, rho, w)
         kb["k"].joint_powers(xc, w, starts, alive, count, peak)
         uy, uz, peak, w, ci = uy[alive], uz[alive], peak[alive], w[:, alive], ci[alive]
         return uy, uz, peak, w, ci
@@ -214,15 +210,22 @@ class ResolveStage:
             total = np.add.reduceat(model.T, starts, axis=0)            # peaks grouped by cell
             xp = (x - total[cell_of] + model.T)[multi]                  # vector less the others
             j = np.flatnonzero(multi)
-            # elevation afresh on what is left (two sources fool the sparse rows)
-            uz[j], _ = self.beams.elevation_search(xp, uy[j], rho[j])
-            if self.refine:
-                uy[j], uz[j], _ = self.beams.newton(xp, uy[j], uz[j], rho[j])
-            w[:, j] = self.beams.steer(uy[j], uz[j], rho[j])
+            self._refine_apart(xp, j, uy, uz, rho, w)
         amps = self.joint_amplitudes(x, w, cell_of, rank)
         multi = count[cell_of] > 1
         peak[multi] = np.abs(amps[multi]) ** 2
         return uy, uz, peak, w, ci
+
+    def _refine_apart(self, xp: np.ndarray, j: np.ndarray, uy: np.ndarray, uz: np.ndarray,
+                      rho: np.ndarray, w: np.ndarray) -> None:
+        """Sources ``j`` refined each on its cell's vector less the other sources' fit ``xp``
+        ``(J, M)``: their directions ``uy, uz`` and weights ``w`` updated in place (one step of
+        both joint loops)."""
+        # elevation afresh on what is left (two sources fool the sparse rows)
+        uz[j], _ = self.beams.elevation_search(xp, uy[j], rho[j])
+        if self.refine:
+            uy[j], uz[j], _ = self.beams.newton(xp, uy[j], uz[j], rho[j])
+        w[:, j] = self.beams.steer(uy[j], uz[j], rho[j])
 
     @staticmethod
     def join_lone(lone: tuple[np.ndarray, ...] | None, uy: np.ndarray, uz: np.ndarray,
