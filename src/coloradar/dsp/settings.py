@@ -215,7 +215,7 @@ class AliasSettings:
     alias_margin_db
         Radars without overlapping virtual pairs (the single chip) choose the Doppler alias
         by a model selection on the filled row (one or two sources under each hypothesis,
-        :meth:`RadarProcessor._choose_alias`); another hypothesis must explain this margin
+        :meth:`~coloradar.dsp.detection.alias.AliasStage.choose`); another hypothesis must explain this margin
         [dB] more power than the folded one.
     """
 

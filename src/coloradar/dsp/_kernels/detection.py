@@ -26,7 +26,7 @@ def group_peaks(stat: Any, mask: Any, noise: Any, nxt: Any, strong: float,
     (Doppler wrapped; along range, the bin after the last compared where ``nxt`` is given,
     else the edge is no bar; the diagonals with range mirrored at the edges); cells that
     pass the CFAR and peak along one axis only are kept within one cell of a peak at least
-    ``strong`` times its noise. (:func:`coloradar.dsp.processor._group_peaks` in one pass.)"""
+    ``strong`` times its noise. (:func:`coloradar.dsp.detection.cfar_stage.group_peaks` in one pass.)"""
     nd, nr = stat.shape
     has_nxt = nxt.size > 0
     along = np.zeros((nd, nr), np.uint8)         # bit 0: along Doppler, bit 1: along range

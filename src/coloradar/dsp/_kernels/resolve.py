@@ -104,7 +104,7 @@ def joint_round(x: Any, w: Any, starts: Any, alive: Any, floor: Any, dyn: float,
                 f_threshold: Any, residual_test: bool, amps: Any,
                 count: Any) -> bool:  # pragma: no cover - compiled
     """One round of the keep tests of cells with several sources
-    (:meth:`coloradar.dsp.processor.RadarProcessor._resolve_peaks`): each cell's joint
+    (:meth:`coloradar.dsp.detection.resolve.ResolveStage.resolve`): each cell's joint
     least-squares amplitudes of its alive peaks (cell ``c``: peaks ``starts[c] …
     starts[c + 1] − 1``, its strongest first; vector ``x[p]`` complex64 ``(P, M)``, weights
     ``w`` complex64 ``(M, P)``); a source stays while its power reaches the cell's noise

@@ -333,7 +333,7 @@ class ResolveStage:
         with one source gets its beam value; only cells with several are solved."""
         kb = self.beams.tables
         if kb is not None and cell_of.size and np.all(np.diff(cell_of) >= 0):
-            # (the peaks of a cell are consecutive, as _resolve_peaks keeps them)
+            # (the peaks of a cell are consecutive, as resolve keeps them)
             starts = np.flatnonzero(firsts(cell_of, end=True))
             amps = np.empty(cell_of.size, dtype=np.complex128)
             kb["k"].joint_amplitudes(c64(x), c64(w), starts.astype(np.int64), amps)
