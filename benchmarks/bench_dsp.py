@@ -333,7 +333,7 @@ def main() -> None:
         near = near_field_frames(name, args.calib, args.frames)
         if near is not None:
             proc_nf = RadarProcessor(near[0])
-            assert proc_nf._focus
+            assert proc_nf.detector.beams.focus
             jobs[NF_PC] = (proc_nf.pointcloud, near[1])
             jobs[NF_HM] = (proc_nf.heatmap, near[1])
         t = interleaved(jobs, args.repeat)

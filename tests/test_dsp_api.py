@@ -91,3 +91,56 @@ def test_fused_processor_equals_the_chain_of_stage_functions(name):
     fused = proc.range_doppler(adc)
     assert fused.shape == staged.shape
     np.testing.assert_allclose(fused, staged, atol=1e-4 * np.abs(staged).max())
+
+
+def test_unknown_setting_names_the_closest_ones():
+    from coloradar.cli._common import processing_setting
+
+    with pytest.raises(ValueError, match=r"did you mean pfa\b"):
+        ProcessingSettings.parse_setting("pfaa=1e-5")
+    with pytest.raises(ValueError, match="did you mean sidelobe_margin_db"):
+        ProcessingSettings.parse_setting("sidelobe_margin=3")
+    with pytest.raises(ValueError) as far:
+        ProcessingSettings.parse_setting("zzzz=1")
+    assert "did you mean" not in str(far.value)
+    # the command line's --set says the same (argparse shows the message)
+    with pytest.raises(Exception, match=r"did you mean pfa\b"):
+        processing_setting("pfaa=1e-5")
+    assert ProcessingSettings.parse_setting("pfa=1e-5") == ("pfa", 1e-5)
+
+
+def test_every_setting_reaches_its_stage_through_one_group():
+    from dataclasses import fields
+
+    from coloradar.dsp.settings import (
+        AliasSettings,
+        AngleSettings,
+        ArraySettings,
+        CFARSettings,
+        CubeSettings,
+        GuardSettings,
+        PointSettings,
+    )
+
+    groups = (CubeSettings, ArraySettings, CFARSettings, AngleSettings, AliasSettings,
+              GuardSettings, PointSettings)
+    names = [f.name for g in groups for f in fields(g)]
+    flat = [f.name for f in fields(ProcessingSettings)]
+    assert sorted(names) == sorted(flat)                 # each flat setting in exactly one group
+    # a changed setting arrives in the stage that uses it, with its value
+    s = ProcessingSettings(pfa=1e-6, sidelobe_margin_db=3.0, doppler_unwrap=4.0,
+                           angle_pfa=1e-2, phase_centre=False, range_window="blackman")
+    proc = RadarProcessor(preset_radar("cascade"), s)
+    assert proc.detector.cfar.settings.pfa == 1e-6
+    assert proc.detector.guard.settings.sidelobe_margin_db == 3.0
+    assert proc.detector.alias.settings.doppler_unwrap == 4.0
+    assert proc.detector.resolve.settings.angle_pfa == 1e-2
+    assert proc.detector.points.settings.phase_centre is False
+    assert not proc.detector.points.centre.any()             # no phase centre: the origin
+    assert proc.cube.settings.range_window == "blackman"
+    for g in groups:
+        for f in fields(g):
+            assert getattr(getattr(s, {CubeSettings: "cube", ArraySettings: "array",
+                                       CFARSettings: "cfar", AngleSettings: "angle",
+                                       AliasSettings: "alias", GuardSettings: "guard",
+                                       PointSettings: "points"}[g]), f.name) == getattr(s, f.name)

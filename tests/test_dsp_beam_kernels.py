@@ -15,6 +15,7 @@ import pytest
 
 from coloradar.calib import preset_radar
 from coloradar.dsp import RadarProcessor
+from coloradar.dsp.detection import ResolveStage
 from coloradar.dsp.heatmap import available_engines
 from coloradar.sim import synthesize_adc
 
@@ -26,7 +27,7 @@ RADARS = ("cascade", "single_chip")
 
 def _proc(name: str) -> RadarProcessor:
     proc = RadarProcessor(preset_radar(name), engine="numba")
-    assert proc._beam_kernels is not None
+    assert proc.detector.beams.tables is not None
     return proc
 
 
@@ -60,7 +61,7 @@ def _random_directions(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np
 def test_steering_columns_match_the_definition(name):
     proc = _proc(name)
     uy, uz = _random_directions(np.random.default_rng(0), 50)
-    got = proc._steer(uy, uz, np.full(50, 5.0))
+    got = proc.detector.beams.steer(uy, uz, np.full(50, 5.0))
     assert got.dtype == np.complex64 and got.shape == (proc.detection_grid.num_elements, 50)
     np.testing.assert_allclose(got, _steering(proc, uy, uz), atol=2e-6)
 
@@ -81,10 +82,9 @@ def test_newton_refinement_finds_the_source_direction(name):
     start_z = uz + rng.uniform(-dz, dz, n)
     out = np.empty((3, n))
     step = (2.0 / (g.num_az * g.rho), 2.0 / (g.num_el * g.rho))
-    proc._beam_kernels["k"].newton_refine(x, proc._beam_kernels["ca"], proc._beam_kernels["cb"],
-                                          proc._beam_kernels["az"], proc._beam_kernels["el"],
-                                          start_y, start_z, step[0], step[1], 6, True,
-                                          out[0], out[1], out[2])
+    kb = proc.detector.beams.tables
+    kb["k"].newton_refine(x, kb["ca"], kb["cb"], kb["az"], kb["el"], start_y, start_z, step[0],
+                          step[1], 6, True, out[0], out[1], out[2])
     np.testing.assert_allclose(out[0], uy, atol=1e-5)
     np.testing.assert_allclose(out[1], uz, atol=1e-4)
     np.testing.assert_allclose(out[2], np.abs(amp) ** 2, rtol=1e-5)
@@ -102,7 +102,7 @@ def test_elevation_search_matches_a_brute_force_scan(name):
          + 0.05 * (rng.standard_normal((n, proc.detection_grid.num_elements))
                    + 1j * rng.standard_normal((n, proc.detection_grid.num_elements))))
     x = x.astype(np.complex64)
-    got_uz, got_p = proc._elevation_search(x, uy, np.full(n, 5.0))
+    got_uz, got_p = proc.detector.beams.elevation_search(x, uy, np.full(n, 5.0))
     g = proc.detection_grid
     m = g.num_elements
     for i in range(n):
@@ -125,17 +125,17 @@ def test_beam_neighbourhood_matches_the_definition(name):
     rng = np.random.default_rng(3)
     adc = synthesize_adc(calib, [[4.0, 1.0, 0.3], [6.0, -2.0, 0.0]], [[0.4, 0, 0], [-0.3, 0, 0]],
                          3e3, noise_std=10.0, rng=4)
-    rcube = proc._range_cube(adc, extra=True)
+    rcube = proc.cube.range_cube(adc, extra=True)
     nr = proc.num_range_bins
-    raw = proc._doppler(rcube[..., :nr], compensate=False)
-    nxt = proc._doppler(rcube[..., nr:], compensate=False)
+    raw = proc.cube.doppler(rcube[..., :nr], compensate=False)
+    nxt = proc.cube.doppler(rcube[..., nr:], compensate=False)
     ntx, _, nd, _ = raw.shape
     d = np.array([0, nd - 1, nd // 2, 3, 5])                    # both Doppler edges
     r = np.array([10, 20, nr - 1, 0, nr - 1])                   # both range edges
     alias = rng.integers(-1, 2, d.size)
     uy, uz = _random_directions(rng, d.size)
     steer = _steering(proc, uy, uz)
-    got = proc._beam_neighbourhood(raw, d, r, alias, steer.astype(np.complex64), nxt)
+    got = proc.detector.guard.beam_neighbourhood(raw, d, r, alias, steer.astype(np.complex64), nxt)
     first = calib.antenna.virtual.first_pair
     m = first.shape[0]
     t = np.arange(ntx)
@@ -195,7 +195,7 @@ def test_point_clouds_of_both_engines_agree_with_focusing(name):
     rng = np.random.default_rng(11)
     fast = RadarProcessor(calib, engine="numba", near_field=True)
     ref = RadarProcessor(calib, engine="numpy", near_field=True)
-    assert fast._focus and ref._focus
+    assert fast.detector.beams.focus and ref.detector.beams.focus
     for f in range(2):
         k = 5
         _check_engines_agree(fast, ref, exact_adc, calib, rng, f, k, (1.5, 5.0), 0.9)
@@ -206,7 +206,7 @@ def _focused_bound_case(seed: int, near: bool):
     calibration's reflector where there is one), random vectors, directions and ranges."""
     calib = _cascade_calib()
     proc = RadarProcessor(calib, engine="numba", near_field=True)
-    assert proc._focus and proc._near_terms is not None
+    assert proc.detector.beams.focus and proc.detector.beams.near_terms is not None
     rng = np.random.default_rng(seed)
     g = proc.detection_grid
     m, n_cells, per = g.num_elements, 6, 4
@@ -220,7 +220,7 @@ def _focused_bound_case(seed: int, near: bool):
     uz_p = rng.uniform(-0.6, 0.6, p)
     rho = (rng.uniform(0.3, 3.0, p) if near else rng.uniform(10.0, 40.0, p))
     rho = np.repeat(rho[::per], per)                            # one range per cell
-    wp = proc._steer(uy[primary], uz_p[primary], rho[primary])
+    wp = proc.detector.beams.steer(uy[primary], uz_p[primary], rho[primary])
     lead = (np.cumsum(primary) - 1).astype(np.int64)
     return proc, x, wp, lead, uy, rho
 
@@ -237,21 +237,21 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
     from coloradar.dsp.array import sines_to_unit
 
     proc, x, wp, lead, uy, rho = _focused_bound_case(seed, near)
-    kb = proc._beam_kernels
+    kb = proc.detector.beams.tables
     g = proc.detection_grid
     ne = g.num_el
     half = 1.0 / (ne * g.rho)
     u_grid = 2.0 * half * max(ne // 2 + 0.5, ne - 0.5 - ne // 2)
-    sq, cyy, cyz, czz, ref = proc._near_terms
-    ty2, it = np.unique(proc._near.tx[:, 1] ** 2, return_inverse=True)
-    ry2, ir = np.unique(proc._near.rx[:, 1] ** 2, return_inverse=True)
+    sq, cyy, cyz, czz, ref = proc.detector.beams.near_terms
+    ty2, it = np.unique(proc.detector.beams.near.tx[:, 1] ** 2, return_inverse=True)
+    ry2, ir = np.unique(proc.detector.beams.near.rx[:, 1] ** 2, return_inverse=True)
 
     def kernel(floor: float) -> tuple[np.ndarray, np.ndarray]:
         bound, top = np.empty((2, uy.size))
         kb["k"].secondary_bound_focused(
             x, wp, lead, uy.astype(np.float64), rho, np.full(uy.size, floor), 0.0, kb["ca"],
             kb["az"], kb["row"], int(kb["row"].max()) + 1, sq, cyy, cyz, czz, ref, ty2,
-            it.astype(np.int64), ry2, ir.astype(np.int64), proc._near.wavenumber, u_grid,
+            it.astype(np.int64), ry2, ir.astype(np.int64), proc.detector.beams.near.wavenumber, u_grid,
             half, bound, top)
         return bound, top
 
@@ -269,7 +269,7 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
         uz = np.linspace(-u_max, u_max, 4001)
         uyk = np.full(uz.size, uy[k])
         # focusing as the processor's weights: directions beyond the disc scaled onto it
-        foc = proc._near.focus(sines_to_unit(uyk, uz), np.full(uz.size, rho[k]))
+        foc = proc.detector.beams.near.focus(sines_to_unit(uyk, uz), np.full(uz.size, rho[k]))
         w = _steering(proc, uyk, uz) * foc.astype(np.complex128)
         exact = np.abs(r[k] @ w) ** 2 / m**2
         assert exact.max() <= bound[k], (k, exact.max(), bound[k])
@@ -281,7 +281,8 @@ def test_focused_secondary_bound_holds_at_every_elevation(seed, near):
 def test_peak_grouping_helpers_match_numpy_references():
     """The processor's grouping of peaks by cell gives what ``np.unique`` and ``np.r_`` give,
     on sorted and unsorted cells, with and without repeats, and empty."""
-    from coloradar.dsp.processor import _firsts, _groups
+    from coloradar.dsp.detection._common import firsts as _firsts
+    from coloradar.dsp.detection._common import groups as _groups
 
     rng = np.random.default_rng(3)
     cases = [np.zeros(0, dtype=np.int64), np.array([4]), np.array([2, 2, 2])]
@@ -305,7 +306,7 @@ def test_compiled_focusing_matches_the_fresnel_phase_of_each_antenna_pair(rows):
     visible disc (scaled onto its edge) and both layouts of the vectors."""
     calib = _cascade_calib()
     proc = RadarProcessor(calib, engine="numba", near_field=True)
-    assert proc._focus_tables is not None
+    assert proc.detector.beams.focus_tables is not None
     rng = np.random.default_rng(4)
     k = 40
     uy, uz = rng.uniform(-1.0, 1.0, k), rng.uniform(-0.9, 0.9, k)     # some beyond the disc
@@ -315,7 +316,7 @@ def test_compiled_focusing_matches_the_fresnel_phase_of_each_antenna_pair(rows):
     s = np.sqrt(uy**2 + uz**2)
     scale = np.where(s > 1.0, 1.0 / s, 1.0)
     u = np.column_stack([np.sqrt(np.clip(1 - s**2, 0, None)), uy * scale, uz * scale])
-    t, r, kw = proc._near.tx, proc._near.rx, proc._near.wavenumber
+    t, r, kw = proc.detector.beams.near.tx, proc.detector.beams.near.rx, proc.detector.beams.near.wavenumber
     bracket = ((t**2).sum(1)[None] - (u @ t.T) ** 2 + (r**2).sum(1)[None] - (u @ r.T) ** 2)
     phase = -kw / (2 * rho[:, None]) * bracket                          # (K, M)
     r0 = calib.near_field_reference
@@ -323,7 +324,7 @@ def test_compiled_focusing_matches_the_fresnel_phase_of_each_antenna_pair(rows):
         phase += kw * ((t**2).sum(1) + (r**2).sum(1))[None] / (2 * r0)
     want = x.astype(np.complex128) * np.exp(1j * phase)
     x0 = x.copy()
-    got = proc._focused(x if rows else np.ascontiguousarray(x.T), uy, uz, rho, rows=rows)
+    got = proc.detector.beams.focused(x if rows else np.ascontiguousarray(x.T), uy, uz, rho, rows=rows)
     assert got.dtype == np.complex64
     np.testing.assert_allclose(got if rows else got.T, want, rtol=0, atol=5e-5 * np.abs(x).max())
     # the input is left as it was unless asked otherwise
@@ -335,7 +336,8 @@ def test_compiled_peak_grouping_matches_the_numpy_grouping():
     (integer powers), untested cells (+inf noise), with and without the bin after the last,
     and the small shapes where wrapping and mirroring meet (one or two bins per axis)."""
     from coloradar.dsp import _kernels
-    from coloradar.dsp.processor import STRONG_NEIGHBOUR, _group_peaks
+    from coloradar.dsp.detection.cfar_stage import STRONG_NEIGHBOUR
+    from coloradar.dsp.detection.cfar_stage import group_peaks as _group_peaks
 
     rng = np.random.default_rng(8)
     shapes = [(16, 64), (1, 5), (2, 2), (5, 1), (3, 2), (64, 128)]
@@ -445,9 +447,9 @@ def test_compiled_joint_refinement_is_the_numpy_loop(name, focus, monkeypatch):
         synth = exact_adc if focus else synthesize_adc
         adc = synth(calib, pos, vel, 200.0 * rng_m**2, noise_std=10.0, rng=f)
         got = proc.detect(adc)
-        monkeypatch.setattr(RadarProcessor, "_COMPILED_JOINT", False)
+        monkeypatch.setattr(ResolveStage, "COMPILED_JOINT", False)
         want = proc.detect(adc)
-        monkeypatch.setattr(RadarProcessor, "_COMPILED_JOINT", True)
+        monkeypatch.setattr(ResolveStage, "COMPILED_JOINT", True)
         cells = np.stack([want.range_bin, want.doppler_bin], axis=1)
         multi += len(cells) - len(np.unique(cells, axis=0))
         for field in ("range_bin", "doppler_bin", "azimuth", "elevation", "range", "xyz"):
@@ -466,7 +468,7 @@ def test_joint_amplitudes_of_two_sources_in_one_direction():
     proc_p = RadarProcessor(preset_radar("cascade"), engine="numpy")
     rng = np.random.default_rng(3)
     uy, uz = np.array([0.2, 0.2, -0.4]), np.array([0.1, 0.1, 0.0])   # peaks 0 and 1 alike
-    w = proc_n._steer(uy, uz, np.full(3, 5.0))
+    w = proc_n.detector.beams.steer(uy, uz, np.full(3, 5.0))
     m = w.shape[0]
     xc = (rng.normal(size=m) + 1j * rng.normal(size=m)).astype(np.complex64)
     x = np.repeat(xc[None], 3, axis=0)
@@ -474,7 +476,7 @@ def test_joint_amplitudes_of_two_sources_in_one_direction():
     proj = a[:, [0, 2]] @ np.linalg.lstsq(a[:, [0, 2]], xc.astype(np.complex128), rcond=None)[0]
     amps = np.empty(3, dtype=np.complex128)
     _kernels.joint_amplitudes(x, w, np.array([0, 3]), amps)
-    for got in (amps, proc_p._joint_amplitudes(x, w, np.zeros(3, dtype=np.int64),
+    for got in (amps, proc_p.detector.resolve.joint_amplitudes(x, w, np.zeros(3, dtype=np.int64),
                                                 np.arange(3))):
         assert np.all(np.isfinite(got))
         np.testing.assert_allclose(a @ got, proj, rtol=0, atol=1e-4 * np.abs(proj).max())

@@ -29,7 +29,7 @@ adc = (g.standard_normal(calib.frame_shape) + 1j * g.standard_normal(calib.frame
 proc = RadarProcessor(calib)
 fast, ref = proc.heatmap(adc), RadarProcessor(calib, engine="numpy").heatmap(adc)
 assert np.allclose(fast[..., 0], ref[..., 0], rtol=2e-4, atol=0), "heatmaps differ"
-print("engine", proc._engine)
+print("engine", proc.cube.engine)
 """
 
 
@@ -40,7 +40,9 @@ def _copy_package(dst: Path, blocked_pycache: bool) -> Path:
     if blocked_pycache:
         # a *file* named __pycache__ beside the kernels: numba cannot make its in-tree cache
         # there even as root (for whom a read-only mode bit would not stop writes)
-        (root / "coloradar" / "dsp" / "__pycache__").write_text("")
+        # (in every folder that holds kernels: the package coloradar/dsp/_kernels)
+        for folder in (root / "coloradar" / "dsp", root / "coloradar" / "dsp" / "_kernels"):
+            (folder / "__pycache__").write_text("")
         for p in [*sorted(root.rglob("*"), reverse=True), root]:
             p.chmod(p.stat().st_mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
     return root

@@ -1,10 +1,15 @@
-"""The shape of the code: short functions with short parameter lists in ``batch/``, ``interop/``
-and ``sim/run.py`` (at most 120 lines and 10 parameters), and no import circles among
-coloradar's modules (docs/conventions.md §4).
+"""The shape of the code (docs/conventions.md §4), read from the source with :mod:`ast`, never
+by importing it, across all of ``src/coloradar``:
 
-Both are read from the source with :mod:`ast`, never by importing it: an import made only for
-type checking (``if TYPE_CHECKING:``) or inside a function counts like any other, because a
-reader following the code walks it all the same.
+* no function over 120 lines or 10 parameters (a compiled kernel of ``dsp/_kernels/`` may take
+  more parameters, its arrays and sizes, not more lines), no class over 500 lines, no module
+  of 1,000 lines or more;
+* no import circles among coloradar's modules: an import made only for type checking
+  (``if TYPE_CHECKING:``) or inside a function counts like any other, because a reader
+  following the code walks it all the same.
+
+:data:`ALLOWED_OVERSIZE` names the functions outside ``dsp/`` that break the limits today and are
+being fixed on other branches; it must shrink to empty.
 """
 
 from __future__ import annotations
@@ -19,8 +24,26 @@ PKG = SRC / "coloradar"
 
 MAX_LINES = 120
 MAX_PARAMS = 10
-# Where functions must stay short (folders or files, relative to src/coloradar).
-SHORT_FUNCTIONS = ("batch", "interop", "sim/run.py")
+MAX_CLASS_LINES = 500
+MAX_MODULE_LINES = 999
+# Compiled kernels (numba-decorated functions) here may take more parameters, not more lines.
+COMPILED_KERNELS = "dsp/_kernels"
+# Functions that break the limits today, each being fixed on its own branch (odometry: issue 25;
+# the others: issue 28's limit fixes). THIS LIST MUST SHRINK TO EMPTY: never add to it; remove an
+# entry when its function is fixed. Nothing in dsp/ may be listed.
+ALLOWED_OVERSIZE = frozenset({
+    "geometry/mapping.py:build_map",
+    "learning/samples.py:SyncedSamples.__init__",
+    "odometry/benchmark.py:benchmark",
+    "odometry/ego_velocity.py:estimate_ego_velocity",
+    "odometry/pipeline.py:_ego_velocity",
+    "odometry/pipeline.py:run_ego_velocity",
+    "odometry/pipeline.py:run_odometry",
+    "odometry/rio.py:rio_odometry",
+    "viz/animate.py:animate_run",
+    "viz/frame_views.py:frame_figure",
+    "viz/radar.py:plot_heatmap_slice",
+})
 
 
 def _module_name(path: Path) -> str:
@@ -122,20 +145,49 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
-def _functions(path: Path):
-    tree = ast.parse(path.read_text())
-    for node in ast.walk(tree):
-        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
-            a = node.args
-            params = [*a.posonlyargs, *a.args, *a.kwonlyargs]
-            params = [p for p in params if p.arg not in ("self", "cls")]
-            n = len(params) + (a.vararg is not None) + (a.kwarg is not None)
-            yield node.name, node.lineno, node.end_lineno - node.lineno + 1, n
+def _is_compiled(node: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    """Whether a function is decorated as a numba kernel (``numba.njit(...)``, ``_jit(...)``)."""
+    for dec in node.decorator_list:
+        f = dec.func if isinstance(dec, ast.Call) else dec
+        name = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")
+        if name in ("njit", "jit", "_jit"):
+            return True
+    return False
 
 
-def _short_function_files() -> list[Path]:
-    return [p for d in SHORT_FUNCTIONS
-            for p in ([PKG / d] if d.endswith(".py") else sorted((PKG / d).rglob("*.py")))]
+def definitions(source: str, compiled_ok: bool = False) -> list[str]:
+    """Every function and class of ``source`` (text of one module) over the limits, as
+    ``"qualified.name (line L): what"``; ``compiled_ok``: numba kernels may take more
+    parameters."""
+    out: list[str] = []
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                name = f"{prefix}{child.name}"
+                n = (child.end_lineno or child.lineno) - child.lineno + 1
+                if isinstance(child, ast.ClassDef):
+                    if n > MAX_CLASS_LINES:
+                        out.append(f"{name} (line {child.lineno}): class of {n} lines")
+                else:
+                    a = child.args
+                    params = [p for p in (*a.posonlyargs, *a.args, *a.kwonlyargs)
+                              if p.arg not in ("self", "cls")]
+                    k = len(params) + (a.vararg is not None) + (a.kwarg is not None)
+                    if n > MAX_LINES:
+                        out.append(f"{name} (line {child.lineno}): {n} lines")
+                    if k > MAX_PARAMS and not (compiled_ok and _is_compiled(child)):
+                        out.append(f"{name} (line {child.lineno}): {k} parameters")
+                visit(child, name + ".")
+            else:
+                visit(child, prefix)
+
+    visit(ast.parse(source), "")
+    return out
+
+
+def _rel(path: Path) -> str:
+    return path.relative_to(PKG).as_posix()
 
 
 def test_cycle_finder_finds_a_planted_circle():
@@ -156,11 +208,39 @@ def test_no_import_cycles():
     assert import_cycles(import_graph()) == []
 
 
-@pytest.mark.parametrize("path", _short_function_files(),
-                         ids=lambda p: str(p.relative_to(PKG)))
-def test_functions_are_short(path):
-    long = [f"{name} (line {line}): {n} lines" for name, line, n, _ in _functions(path)
-            if n > MAX_LINES]
-    wide = [f"{name} (line {line}): {k} parameters" for name, line, _, k in _functions(path)
-            if k > MAX_PARAMS]
-    assert not long and not wide, "; ".join(long + wide)
+def test_size_checker_finds_planted_offenders():
+    body = "\n".join(["    x = 1"] * 119)
+    src = (f"def ok(a, b, c, d, e, f, g, h, i, j):\n{body}\n"                 # 120 lines, 10
+           f"def long():\n{body}\n    x = 2\n"                                # 121 lines
+           "def wide(a, b, c, d, e, f, g, h, i, *j, k):\n    pass\n"            # 11 parameters
+           "@_jit(nogil=True)\ndef kernel(a, b, c, d, e, f, g, h, i, j, k):\n    pass\n"
+           "class Big:\n    def method(self, a, b, c, d, e, f, g, h, i, j, k):\n        pass\n"
+           + "\n".join(["    y = 1"] * 498) + "\n")
+    found = definitions(src)
+    assert [f.split(" (")[0] for f in found] == ["long", "wide", "kernel", "Big",
+                                                "Big.method"]
+    # a numba kernel may take more parameters where compiled kernels live, not more lines
+    assert [f.split(" (")[0] for f in definitions(src, compiled_ok=True)] == [
+        "long", "wide", "Big", "Big.method"]
+
+
+def test_allowed_oversize_names_real_functions_outside_dsp():
+    for entry in ALLOWED_OVERSIZE:
+        rel, _, name = entry.partition(":")
+        assert not rel.startswith("dsp/"), entry
+        tree = ast.parse((PKG / rel).read_text())
+        names = {n.name for n in ast.walk(tree)
+                 if isinstance(n, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef)}
+        assert name.split(".")[-1] in names, entry
+
+
+@pytest.mark.parametrize("path", sorted(PKG.rglob("*.py")), ids=_rel)
+def test_functions_classes_and_modules_are_short(path):
+    rel = _rel(path)
+    text = path.read_text()
+    problems = [f for f in definitions(text, compiled_ok=rel.startswith(COMPILED_KERNELS + "/"))
+                if f"{rel}:{f.split(' (')[0]}" not in ALLOWED_OVERSIZE]
+    n = len(text.splitlines())
+    if n > MAX_MODULE_LINES:
+        problems.append(f"module of {n} lines")
+    assert not problems, "; ".join(problems)

@@ -1,18 +1,26 @@
 """Radar signal processing: raw ADC frames → range–Doppler cubes, heatmaps, point clouds.
 
-Pure array functions, one module per stage, composed by :class:`RadarProcessor`:
+Pure array functions, one module per step, and the chain's stages built from them, composed by
+:class:`RadarProcessor`:
 
-=========  ==============================================================================
-cube       DC removal, phase/frequency calibration, coupling signal, range & Doppler FFTs
-tdm        TDM-MIMO Doppler phase compensation
-array      virtual array → azimuth × elevation FFT grid, bin angles, beamforming
-angle      Bartlett and Capon/MVDR spectra per detection, sub-bin peak refinement
-heatmap    peak-over-Doppler heatmap in the dataset's format
-cfar       CA/GO/SO/OS CFAR in 1D/2D/3D with thresholds from a false-alarm probability
-detect     detections, point clouds, point clouds from (shipped) heatmaps, cell placement
-points     points of any radar frame (ADC, heatmap, shipped cloud): one converter for all
-signs      which azimuth/elevation sign convention matches a sensor's own point clouds
-=========  ==============================================================================
+=============  ==========================================================================
+cube           DC removal, phase/frequency calibration, coupling signal, range & Doppler FFTs
+tdm            TDM-MIMO Doppler phase compensation, Doppler alias hypotheses
+array          virtual array → azimuth × elevation FFT grid, bin angles, beamforming
+angle          Bartlett and Capon/MVDR spectra per detection, sub-bin peak refinement
+heatmap        peak-over-Doppler heatmap in the dataset's format (numpy and numba engines)
+cfar           CA/GO/SO/OS CFAR in 1D/2D/3D with thresholds from a false-alarm probability
+detect         detections, point clouds, point clouds from (shipped) heatmaps, cell placement
+points         points of any radar frame (ADC, heatmap, shipped cloud): one converter for all
+signs          which azimuth/elevation sign convention matches a sensor's own point clouds
+settings       :class:`ProcessingSettings` and its groups, one per stage
+cube_stage     stage 1, the cube: ADC → range cube → range–Doppler cube
+heatmap_stage  stage 2, the heatmap: range–Doppler cube → angle spectra → heatmap
+detection/     stage 3, detection: CFAR → cells and aliases → angle peaks → several-source
+               resolution → guard → points (one module each, :class:`detection.Detector`)
+processor      :class:`RadarProcessor`, the composition
+_kernels/      the compiled (numba) kernels, one module per stage
+=============  ==========================================================================
 
 See ``docs/dsp.md`` for the chain, conventions and choices.
 """
@@ -30,6 +38,7 @@ from .array import (
 from .cfar import (
     CFAR_EDGES,
     CFAR_KINDS,
+    CFARConfig,
     CFAREdge,
     CFARKind,
     CFARResult,
@@ -37,6 +46,7 @@ from .cfar import (
     cfar_scale,
     cfar_window,
     false_alarm_rate,
+    run_cfar,
 )
 from .cube import (
     apply_phase_frequency_calibration,
@@ -56,13 +66,20 @@ from .points import (
     default_point_source,
     radar_point_stream,
 )
-from .processor import (
+from .processor import RadarProcessor
+from .settings import (
     ANGLE_METHODS,
     COUPLING_DOMAINS,
+    AliasSettings,
     AngleMethod,
+    AngleSettings,
+    ArraySettings,
+    CFARSettings,
     CouplingDomain,
+    CubeSettings,
+    GuardSettings,
+    PointSettings,
     ProcessingSettings,
-    RadarProcessor,
 )
 from .signs import SignMatch, match_sign_convention
 from .tdm import compensate_tdm, tdm_phase
@@ -76,15 +93,23 @@ __all__ = [
     "OVERLAP_MODES",
     "POINT_SOURCES",
     "WINDOWS",
+    "AliasSettings",
     "AngleGrid",
     "AngleMethod",
+    "AngleSettings",
+    "ArraySettings",
+    "CFARConfig",
     "CFAREdge",
     "CFARKind",
     "CFARResult",
+    "CFARSettings",
     "CouplingDomain",
+    "CubeSettings",
     "Detections",
     "FramePoints",
+    "GuardSettings",
     "OverlapMode",
+    "PointSettings",
     "PointSource",
     "ProcessingSettings",
     "RadarProcessor",
@@ -116,6 +141,7 @@ __all__ = [
     "range_fft",
     "refine_peak",
     "remove_dc",
+    "run_cfar",
     "signed_doppler_bins",
     "sines_to_unit",
     "tdm_phase",

@@ -45,8 +45,21 @@ from scipy.ndimage import correlate1d, rank_filter
 
 from ..errors import SettingsError
 
-__all__ = ["CFAR_EDGES", "CFAR_KINDS", "CFAREdge", "CFARKind", "CFARResult", "cfar", "cfar_scale",
-           "cfar_window", "effective_train_cells", "false_alarm_rate", "power_correlation"]
+__all__ = [
+    "CFAR_EDGES",
+    "CFAR_KINDS",
+    "CFARConfig",
+    "CFAREdge",
+    "CFARKind",
+    "CFARResult",
+    "cfar",
+    "cfar_scale",
+    "cfar_window",
+    "effective_train_cells",
+    "false_alarm_rate",
+    "power_correlation",
+    "run_cfar",
+]
 
 CFARKind = Literal["ca", "go", "so", "os"]
 """Cell-averaging, greatest-of, smallest-of, ordered-statistic."""
@@ -315,11 +328,39 @@ def _ring_sum(x: np.ndarray, g: tuple[int, ...], h: tuple[int, ...], modes: tupl
     return s
 
 
+@dataclass(frozen=True)
+class CFARConfig:
+    """Everything a CFAR run needs besides the map (the parameters of :func:`cfar`, and
+    ``cell_factor``); :func:`run_cfar` runs it.
+
+    Attributes
+    ----------
+    kind, guard, train, pfa, rank, looks, mode, split_axis, excise
+        As :func:`cfar`.
+    cell_factor
+        Independent-cell equivalent of one training cell (``N_eff/N`` from
+        :func:`effective_train_cells` for maps with correlated cells); ``α`` is computed for
+        ``cell_factor`` times the training cells used.
+    """
+
+    kind: CFARKind = "ca"
+    guard: int | tuple[int, ...] = 1
+    train: int | tuple[int, ...] = 8
+    pfa: float = 1e-3
+    rank: float | int = 0.75
+    looks: float = 1
+    mode: CFAREdge | tuple[CFAREdge, ...] = "wrap"
+    split_axis: int = -1
+    cell_factor: float = 1.0
+    excise: bool = False
+
+
 def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] = 1,
          train: int | tuple[int, ...] = 8, pfa: float = 1e-3, *, rank: float | int = 0.75,
          looks: float = 1, mode: CFAREdge | tuple[CFAREdge, ...] = "wrap", split_axis: int = -1,
-         cell_factor: float = 1.0, excise: bool = False) -> CFARResult:
-    """Run a CFAR detector on a power map of any dimension.
+         excise: bool = False) -> CFARResult:
+    """Run a CFAR detector on a power map of any dimension (:func:`run_cfar` with a
+    :class:`CFARConfig`, which also takes the correlated maps' ``cell_factor``).
 
     Parameters
     ----------
@@ -343,10 +384,6 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
         mirrored cells repeat cells and make the estimate noisier than its count says).
     split_axis
         GO/SO: axis along which the training cells are split into two halves.
-    cell_factor
-        Independent-cell equivalent of one training cell (``N_eff/N`` from
-        :func:`effective_train_cells` for maps with correlated cells); ``α`` is computed for
-        ``cell_factor`` times the training cells used.
     excise
         CA/GO/SO: run twice; cells above the first pass's threshold are replaced by their
         first-pass noise estimate before the second. A strong target inside another cell's
@@ -359,6 +396,21 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
     -------
     CFARResult
     """
+    return run_cfar(power, CFARConfig(kind, guard, train, pfa, rank, looks, mode, split_axis,
+                                      1.0, excise))
+
+
+def run_cfar(power: np.ndarray, config: CFARConfig) -> CFARResult:
+    """:func:`cfar` of ``power`` with the settings of ``config``.
+
+    Returns
+    -------
+    CFARResult
+    """
+    kind, guard, train, pfa, rank = (config.kind, config.guard, config.train, config.pfa,
+                                     config.rank)
+    looks, mode, split_axis = config.looks, config.mode, config.split_axis
+    cell_factor, excise = config.cell_factor, config.excise
     x = np.asarray(power, dtype=np.float64)
     nd = x.ndim
     g, t = _per_axis(guard, nd, "guard"), _per_axis(train, nd, "train")
@@ -376,12 +428,11 @@ def cfar(power: np.ndarray, kind: CFARKind = "ca", guard: int | tuple[int, ...] 
         raise SettingsError("mode 'truncate' is for CA/GO/SO; OS needs a full window "
                          "('mirror' or 'reflect')")
     if excise and kind != "os":
-        first = cfar(x, kind, g, t, pfa, rank=rank, looks=looks, mode=modes,
-                     split_axis=split_axis, cell_factor=cell_factor)
+        once = CFARConfig(kind, g, t, pfa, rank, looks, modes, split_axis, cell_factor)
+        first = run_cfar(x, once)
         if first.detections.any():
             x = np.where(first.detections, first.noise, x)
-            res = cfar(x, kind, g, t, pfa, rank=rank, looks=looks, mode=modes,
-                       split_axis=split_axis, cell_factor=cell_factor)
+            res = run_cfar(x, once)
             power = np.asarray(power, dtype=np.float64)
             return CFARResult(power > res.threshold, res.threshold, res.noise, res.scale)
         return first

@@ -396,12 +396,13 @@ def sidelobe_mask(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndar
 
 
 def sidelobe_pairs(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.ndarray,
-                   excess: np.ndarray, ref_doppler: np.ndarray, ref_range: np.ndarray,
-                   ref_power: np.ndarray, env_doppler: np.ndarray, env_range: np.ndarray,
-                   num_doppler: int, margin: float, min_lag: int = 2
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   excess: np.ndarray, refs: tuple[np.ndarray, np.ndarray, np.ndarray],
+                   envelopes: tuple[np.ndarray, np.ndarray], num_doppler: int, margin: float,
+                   min_lag: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs (point, stronger cell) where the cell's window sidelobes could explain the point.
 
+    ``refs``: the reference cells' Doppler bins, range bins and powers; ``envelopes``: the
+    windows' sidelobe envelopes ``(E_d, E_r)`` (:func:`sidelobe_envelope`).
     As :func:`sidelobe_mask`, but between points and a separate set of reference cells, and
     only for references at least ``min_lag`` bins away along range or Doppler (neighbouring
     cells are one target's main lobe: the beam grouping decides there). Point ``i`` is
@@ -414,6 +415,8 @@ def sidelobe_pairs(doppler_bin: np.ndarray, range_bin: np.ndarray, power: np.nda
         int64 ``(P,)`` point indices, int64 ``(P,)`` reference indices and float64 ``(P,)``
         leakage factors ``E_d·E_r`` of every such pair.
     """
+    ref_doppler, ref_range, ref_power = refs
+    env_doppler, env_range = envelopes
     k, n = power.size, ref_power.size
     out_i, out_j, out_l = [], [], []
     step = max(1, (1 << 20) // max(n, 1))
