@@ -223,27 +223,12 @@ def is_run_folder_path(path: str | os.PathLike[str]) -> bool:
     return p.is_dir() and _has_run_marker(p)
 
 
-def _setting_names() -> list[str]:
-    from dataclasses import fields
-
-    from ..dsp import ProcessingSettings
-
-    return [f.name for f in fields(ProcessingSettings) if f.name != "workers"]
-
-
 def processing_setting(text: str) -> tuple[str, object]:
-    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`;
-    an unknown name is answered with the closest known ones (difflib)."""
+    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`
+    (which answers an unknown name with the closest known ones)."""
     from ..dsp import ProcessingSettings  # dsp is heavy: only for the commands that parse it
 
     try:
         return ProcessingSettings.parse_setting(text)
     except ValueError as exc:
-        name, sep, _ = text.partition("=")
-        names = _setting_names()
-        if sep and name.strip() not in names:
-            hint = did_you_mean(name.strip(), names)
-            raise argparse.ArgumentTypeError(
-                f"unknown setting {name.strip()!r} in {text!r}; {hint}"
-                f"(settings: {', '.join(names)})") from None
         raise argparse.ArgumentTypeError(str(exc)) from None

@@ -48,6 +48,7 @@ from .cfar import (
     false_alarm_rate,
     run_cfar,
 )
+from .coupling_estimate import CouplingEstimate, estimate_coupling
 from .cube import (
     apply_phase_frequency_calibration,
     coupling_signal,
@@ -104,6 +105,7 @@ __all__ = [
     "CFARResult",
     "CFARSettings",
     "CouplingDomain",
+    "CouplingEstimate",
     "CubeSettings",
     "Detections",
     "FramePoints",
@@ -130,6 +132,7 @@ __all__ = [
     "covariance",
     "default_point_source",
     "doppler_fft",
+    "estimate_coupling",
     "false_alarm_rate",
     "heatmap_cell_xyz",
     "heatmap_from_elements",
