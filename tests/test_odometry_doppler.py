@@ -208,8 +208,8 @@ def _detrend(x: np.ndarray, k: int = 50) -> np.ndarray:
 
 def test_pitching_heaving_rig_recovered_in_3d():
     """A vehicle-like rig (pitch of a few degrees, 0.3 m of heave) seen by the single chip
-    alone: the Doppler-point filter follows the heave in 3-D; the planar loosely coupled
-    filter (v_z held at 0 in the radar frame) does not see it."""
+    alone: the Doppler-point filter with the 3-D model (``--model 3d``) follows the heave; the
+    planar loosely coupled filter (v_z held at 0 in the radar frame) does not see it."""
     from coloradar.geometry import Trajectory
 
     model = CloudModel(points=(15, 30), azimuth_std=2 * DEG, elevation_std=3 * DEG,
@@ -220,11 +220,13 @@ def test_pitching_heaving_rig_recovered_in_3d():
                                     frame="single_chip")
     gt = Trajectory(imu_t, st.position, st.rotation, "groundtruth")
     corr = {}
-    for update in ("doppler", "ego-velocity"):
+    configs = {"doppler": RioConfig(update="doppler", doppler=DopplerConfig(planar=False)),
+               "ego-velocity": RioConfig(update="ego-velocity")}
+    for update, cfg in configs.items():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = rio_odometry(track, calib, imu_t, imu, points=[clouds], groundtruth=gt,
-                               config=RioConfig(update=update))
+                               config=cfg)
         p_gt = gt.interpolate_arrays(res.trajectory.timestamps)[0]
         heave = _detrend(p_gt[:, 2])
         assert np.ptp(heave) > 0.2                                 # it does heave

@@ -157,9 +157,10 @@ def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityCon
                   processing: dict | None, start: float | None, duration: float | None,
                   stride: int, max_frames: int | None, seed: int, progress: Progress | None,
                   still_config: ZeroVelocityConfig | None = None
-                  ) -> tuple[EgoVelocityTrack, np.ndarray]:
-    """:func:`run_ego_velocity`, and per frame whether the radar sees a still world
-    (:func:`~coloradar.odometry.zero_velocity.still_world`, computed on the same clouds)."""
+                  ) -> tuple[EgoVelocityTrack, np.ndarray, list[np.ndarray]]:
+    """:func:`run_ego_velocity`, per frame whether the radar sees a still world
+    (:func:`~coloradar.odometry.zero_velocity.still_world`, computed on the same clouds), and
+    the clouds themselves (float32 ``(N_k, 5)``, for the filter's Doppler-point update)."""
     source = source or default_source(seq, radar)
     if source not in SOURCES:
         raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
@@ -172,6 +173,7 @@ def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityCon
     skipped: dict[int, str] = {}
     still = np.zeros(idx.size, dtype=bool)
     zv = still_config or ZeroVelocityConfig()
+    kept: list[np.ndarray] = []
 
     def clouds() -> Iterator[np.ndarray]:
         for j, k in enumerate(idx):
@@ -180,17 +182,19 @@ def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityCon
                 # One bad frame gives no estimate for that frame, as `coloradar process`
                 # skips it; the track keeps its time so the trajectory bridges the gap.
                 skipped[j] = f"unreadable frame: {stream.path(int(k))}"
-                yield np.zeros((0, 5), dtype=np.float32)
+                kept.append(np.zeros((0, 5), dtype=np.float32))
+                yield kept[-1]
             else:
                 cloud = convert(frame)
                 still[j] = still_world(cloud, zv, cfg.min_range)
+                kept.append(np.asarray(cloud, dtype=np.float32))
                 yield cloud
 
     track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
                                     frame=radar, progress=progress)
     for j, why in skipped.items():
         track.reasons[j] = why
-    return track, still
+    return track, still, kept
 
 
 def run_path(seq) -> str:
@@ -329,7 +333,7 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     source = source or default_source(seq, radar)
     cfg = config or ego_velocity_config(seq.calib.radar(radar))
     rcfg = rio_config or RioConfig()
-    track, still = _ego_velocity(seq, radar, source, config=cfg, processing=processing,
+    track, still, cloud = _ego_velocity(seq, radar, source, config=cfg, processing=processing,
                                  start=start, duration=duration, stride=stride,
                                  max_frames=None, seed=seed, progress=progress,
                                  still_config=rcfg.zero_velocity)
@@ -352,21 +356,25 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     }
     extra: list[EgoVelocityTrack] = []
     if estimator == "rio":
-        tracks, stills = [track], [still]
+        tracks, stills, clouds = [track], [still], [cloud]
         for r in fuse:
-            tr_r, st_r = _ego_velocity(seq, r, None, config=None, processing=None,
-                                       start=start, duration=duration, stride=stride,
-                                       max_frames=None, seed=seed, progress=None,
-                                       still_config=rcfg.zero_velocity)
+            tr_r, st_r, cl_r = _ego_velocity(seq, r, None, config=None, processing=None,
+                                             start=start, duration=duration, stride=stride,
+                                             max_frames=None, seed=seed, progress=None,
+                                             still_config=rcfg.zero_velocity)
             tracks.append(tr_r)
             stills.append(st_r)
+            clouds.append(cl_r)
             extra.append(tr_r)
         res = rio_odometry(tracks, seq.calib, seq.imu.timestamps, seq.imu.data,
-                           radars=(radar, *fuse), config=rcfg, groundtruth=gt, still=stills)
+                           radars=(radar, *fuse), config=rcfg, groundtruth=gt, still=stills,
+                           points=clouds)
         traj = res.trajectory
         info["fuse"] = list(fuse)
         info["rio"] = rio_summary(res, rcfg)
-        what = "radar-inertial EKF (IMU propagation, radar velocity updates)"
+        what = ("radar-inertial EKF (IMU propagation, Doppler-point updates)"
+                if rcfg.update == "doppler" else
+                "radar-inertial EKF (IMU propagation, radar velocity updates)")
     else:
         traj = radar_inertial_odometry(track, seq.calib, orientation=orientation,
                                        imu_timestamps=imu_t, imu_rates=imu_w, groundtruth=gt,

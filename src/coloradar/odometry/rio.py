@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.integrate import trapezoid  # numpy.trapezoid needs numpy >= 2
@@ -93,6 +93,10 @@ class RioConfig:
         the wrong time, and their error goes into the biases and rotations.
     estimate_extrinsic_rotation
         Estimate each radar's rotation relative to the IMU online (the calibration's as prior).
+    extrinsic_warmup
+        Seconds after the start during which that rotation is held at the calibration's [s]:
+        the start's attitude errors (gravity aligned while moving) would otherwise be taken
+        for a mounting error and kept.
     extrinsic_rotation_std
         Prior uncertainty of that rotation [rad].
     zero_velocity
@@ -116,15 +120,12 @@ class RioConfig:
         accepted in between, the filter has lost the radars: its velocity restarts from the
         next frame's measurement (counted as ``resets``).
     update
-        ``"doppler"``: the tightly coupled update, each Doppler point of a frame a scalar
-        residual gated on its own (:mod:`.doppler`), when the frames' points are given
+        ``"doppler"`` (default): the tightly coupled update, each Doppler point of a frame a
+        scalar residual gated on its own (:mod:`.doppler`), when the frames' points are given
         (``points`` of :func:`rio_odometry`); the frame's RANSAC ego-velocity only when too
-        few points pass the gate. ``"ego-velocity"`` (default): one RANSAC ego-velocity per
-        frame (loosely coupled, the literature's baseline). The default stays the loosely
-        coupled update because on the tuning runs of ``benchmarks/mc_odometry.py`` (seeds
-        1001-1008, single chip alone) it ended closer (median final error 0.45 % against
-        0.9 %): the single chip's 3-D points leave a ``v_z`` bias that depends on the
-        direction noise, which the filter does not know exactly (docs/odometry.md).
+        few points pass the gate. ``"ego-velocity"``: one RANSAC ego-velocity per frame
+        (loosely coupled, the literature's baseline). Chosen on the tuning runs of
+        ``benchmarks/mc_odometry.py`` (docs/odometry.md).
     doppler
         Settings of the Doppler-point update.
     point_noise
@@ -145,6 +146,7 @@ class RioConfig:
     time_offset: float = 0.0
     time_offset_std: float = 0.05
     time_offset_warmup: float = 0.0
+    extrinsic_warmup: float = 0.0
     estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
@@ -154,7 +156,7 @@ class RioConfig:
     moving_tilt_std: float = 3.0 * _DEG
     max_rejected: int = 5
     anchor_delay: float = 5.0
-    update: str = "ego-velocity"
+    update: str = "doppler"
     doppler: DopplerConfig = field(default_factory=DopplerConfig)
     point_noise: tuple[PointNoise, ...] | None = None
 
@@ -164,6 +166,7 @@ class RioConfig:
                      "velocity_noise_floor", "velocity_noise_scale", "time_offset_std",
                      "extrinsic_rotation_std",
                      "planar_vz_std", "zupt_std", "align_window", "time_offset_warmup",
+                     "extrinsic_warmup",
                      "anchor_delay", "moving_tilt_std"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -401,8 +404,11 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     noises = cfg.point_noise or tuple(_default_noise(calib, n) for n in names)
     if len(noises) != n_r:
         raise SettingsError(f"{n_r} radars but {len(noises)} point noises")
+    # Per radar: the points inform v_z unless the radar's model is planar (DopplerConfig).
+    dcfg = [replace(cfg.doppler, planar=p if cfg.doppler.planar is None else cfg.doppler.planar)
+            for p in planar]
     # Radars whose points observe v_z see the extrinsic's roll and pitch as well.
-    ext_planar = [p and (pts is None or cfg.doppler.planar) for p in planar]
+    ext_planar = [p and (pts is None or bool(d.planar)) for p, d in zip(planar, dcfg, strict=True)]
     zv = cfg.zero_velocity
     static = []
     for r, tr in enumerate(tr_list):
@@ -480,6 +486,8 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
             P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if ext_planar[r] \
                 else cfg.extrinsic_rotation_std**2
     ekf.P = np.diag(P0)
+    for r in range(n_r):
+        ekf.P[ekf.phi_slice(r), ekf.phi_slice(r)] = 0.0      # until extrinsic_warmup
 
     # -- the event loop ----------------------------------------------------------------------
     # Frames of the other radars from before the start are old news: left out.
@@ -522,6 +530,7 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     last_out = -np.inf
     rejected_run = 0                              # radar frames rejected since any acceptance
     td_on = np.zeros(n_r, dtype=bool)
+    ext_on = np.zeros(n_r, dtype=bool)
     for stamp, r, k in events():
         tr = tr_list[r]
         want = stamp + ekf.td[r]
@@ -539,9 +548,15 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
             ekf.P[j, :] = ekf.P[:, j] = 0.0
             ekf.P[j, j] = cfg.time_offset_std**2
             td_on[r] = True
+        if cfg.estimate_extrinsic_rotation and not ext_on[r] \
+                and tau - t0 >= cfg.extrinsic_warmup:
+            sl = ekf.phi_slice(r)
+            ekf.P[sl, :] = ekf.P[:, sl] = 0.0
+            ekf.P[sl, sl] = np.diag(P0[sl])
+            ext_on[r] = True
         used = None
         if pts is not None and not static[r][k] and pts[r][k][0].shape[0]:
-            used = doppler_update(ekf, r, t_ir[r], pts[r][k][0], noises[r], cfg.doppler,
+            used = doppler_update(ekf, r, t_ir[r], pts[r][k][0], noises[r], dcfg[r],
                                   min(want - tau, 0.0))
             st["points"] += pts[r][k][0].shape[0]
         if static[r][k]:
