@@ -192,7 +192,7 @@ def _rio_accuracy(runs: list[str]) -> None:
         radar_inertial_odometry,
         rio_odometry,
     )
-    from coloradar.odometry.pipeline import _ego_velocity
+    from coloradar.odometry.pipeline import EgoVelocityJob, _ego_velocity
     from coloradar.sim.truth import load_truth
 
     cfg = RioConfig()
@@ -208,9 +208,7 @@ def _rio_accuracy(runs: list[str]) -> None:
             seq = open_sequence(run)
             gt = trajectory_from_groundtruth(seq)
             truth = load_truth(run)
-            tr = {r: _ego_velocity(seq, r, None, config=None, processing=None, start=None,
-                                   duration=None, stride=1, max_frames=None, seed=0,
-                                   progress=None, still_config=cfg.zero_velocity)
+            tr = {r: _ego_velocity(seq, r, None, EgoVelocityJob(), cfg.zero_velocity)
                   for r in ("cascade", "single_chip")}
             imu = seq.imu
 

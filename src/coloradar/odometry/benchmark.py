@@ -30,6 +30,7 @@ a row with its error, never the end of the benchmark.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib
 import importlib.util
 import inspect
@@ -62,12 +63,13 @@ from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .evaluation import evaluate_trajectory, evaluation_dict, write_evaluation
 from .metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
-from .pipeline import TRAJECTORY_FILE, VELOCITY_FILE, run_odometry
+from .pipeline import TRAJECTORY_FILE, VELOCITY_FILE, OdometryJob, run_odometry
 from .tum import read_tum, write_tum
 from .velocity_track import EgoVelocityTrack, read_velocity_table, write_velocity_table
 
 __all__ = [
     "BENCHMARK_FILES",
+    "BenchmarkJob",
     "BenchmarkResult",
     "Method",
     "benchmark",
@@ -555,9 +557,12 @@ def choose_runs(available: Sequence[str], runs: str | Sequence[str] | None = Non
 
 
 def _check_odometry_options(methods: Sequence[Method], odometry: dict) -> None:
-    params = inspect.signature(run_odometry).parameters
-    bad = [k for k in odometry if k not in params or k in ("seq", "out", "overwrite",
-                                                           "progress", "estimator")]
+    sig = inspect.signature(run_odometry).parameters
+    # run_odometry takes OdometryJob's fields as keywords (**options).
+    params = {f.name for f in dataclasses.fields(OdometryJob)} \
+        if any(p.kind is p.VAR_KEYWORD for p in sig.values()) else set(sig)
+    bad = [k for k in odometry if k not in params or k in ("overwrite", "progress",
+                                                           "estimator")]
     if bad:
         raise SettingsError(f"run_odometry takes no option {', '.join(bad)}")
     if any(m.kind == "coloradar" and m.spec is not None for m in methods) \
@@ -566,15 +571,37 @@ def _check_odometry_options(methods: Sequence[Method], odometry: dict) -> None:
                             "estimator choice")
 
 
+@dataclass(frozen=True, eq=False)
+class BenchmarkJob:
+    """Options of :func:`benchmark` (each also a keyword of it); see its parameters."""
+
+    methods: Sequence[Method] | None = None
+    runs: str | Sequence[str] | None = None
+    split: str | None = None
+    calib: str | os.PathLike[str] | None = None
+    odometry: dict | None = None
+    align: str = "se3"
+    distances: Sequence[float] = (1.0, 2.0, 5.0)
+    drift_lengths: Sequence[float] = DRIFT_LENGTHS
+    rpe_pairing: str = "every_pose"
+    max_gap: float | None = 1.0
+    executor: Any = None
+    jobs: int | None = 1
+    overwrite: bool = False
+    progress: bool = True
+
+    @classmethod
+    def of(cls, job: BenchmarkJob | None = None, **options: Any) -> BenchmarkJob:
+        """``job`` (default: the defaults) with ``options`` replaced."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        bad = sorted(set(options) - names)
+        if bad:
+            raise SettingsError(f"benchmark: unknown option(s) {', '.join(bad)}")
+        return dataclasses.replace(job or cls(), **options)
+
+
 def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
-              methods: Sequence[Method] | None = None, runs: str | Sequence[str] | None = None,
-              split: str | None = None, calib: str | os.PathLike[str] | None = None,
-              odometry: dict | None = None, align: str = "se3",
-              distances: Sequence[float] = (1.0, 2.0, 5.0),
-              drift_lengths: Sequence[float] = DRIFT_LENGTHS,
-              rpe_pairing: str = "every_pose", max_gap: float | None = 1.0,
-              executor=None, jobs: int | None = 1, overwrite: bool = False,
-              progress: bool = True) -> BenchmarkResult:
+              job: BenchmarkJob | None = None, **options: Any) -> BenchmarkResult:
     """Run and evaluate methods on the runs of a dataset; write the table to ``out``.
 
     Parameters
@@ -584,6 +611,8 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
     out
         Output folder: ``<method>/<run>/`` per task, ``benchmark.txt``, ``benchmark.csv``,
         ``benchmark.json``.
+    job, **options
+        :class:`BenchmarkJob`, or its fields as keywords:
     methods
         Default: ``[builtin_method()]`` (our odometry with its default estimator).
     runs, split
@@ -613,30 +642,31 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
     from ..batch.executors import TaskError, make_executor
     from ..progress import Progress
 
+    j = BenchmarkJob.of(job, **options)
     out_p = Path(out)
-    methods = list(methods or [builtin_method()])
+    methods = list(j.methods or [builtin_method()])
     names = [m.name for m in methods]
     if len(set(names)) != len(names):
         raise SettingsError(f"two methods share a name: {', '.join(names)}; name them "
                             "(NAME=…)")
-    if align not in ALIGNMENTS:
-        raise SettingsError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
-    if rpe_pairing not in RPE_PAIRINGS:
+    if j.align not in ALIGNMENTS:
+        raise SettingsError(f"align must be one of {', '.join(ALIGNMENTS)}, got {j.align!r}")
+    if j.rpe_pairing not in RPE_PAIRINGS:
         raise SettingsError(f"rpe_pairing must be one of {', '.join(RPE_PAIRINGS)}, got "
-                            f"{rpe_pairing!r}")
-    if any(not d > 0 for d in [*distances, *drift_lengths]) or not drift_lengths:
+                            f"{j.rpe_pairing!r}")
+    if any(not d > 0 for d in [*j.distances, *j.drift_lengths]) or not j.drift_lengths:
         raise SettingsError("segment lengths must be positive (and at least one drift length)")
-    odo = dict(odometry or {})
+    odo = dict(j.odometry or {})
     _check_odometry_options(methods, odo)
     found = _dataset_runs(Path(dataset), out_p)
-    chosen = choose_runs(list(found), runs, split)
-    evaluation = {"align": align, "distances": [float(d) for d in distances],
-                  "drift_lengths": [float(d) for d in drift_lengths],
-                  "rpe_pairing": rpe_pairing, "max_gap": max_gap}
-    settings = {"dataset": str(Path(dataset).resolve()), "runs": chosen, "split": split,
+    chosen = choose_runs(list(found), j.runs, j.split)
+    evaluation = {"align": j.align, "distances": [float(d) for d in j.distances],
+                  "drift_lengths": [float(d) for d in j.drift_lengths],
+                  "rpe_pairing": j.rpe_pairing, "max_gap": j.max_gap}
+    settings = {"dataset": str(Path(dataset).resolve()), "runs": chosen, "split": j.split,
                 "methods": [asdict(m) for m in methods], "odometry": odo,
-                "evaluation": evaluation, "calib": None if calib is None else str(calib)}
-    _claim_output(out_p, settings, overwrite)
+                "evaluation": evaluation, "calib": None if j.calib is None else str(j.calib)}
+    _claim_output(out_p, settings, j.overwrite)
 
     tasks: list[_Task] = []
     rows: dict[tuple[str, str], dict] = {}
@@ -645,7 +675,7 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
         for m in methods:
             folder = out_p / m.name / run
             row_path = folder / ROW_FILE
-            if not overwrite and row_path.is_file():
+            if not j.overwrite and row_path.is_file():
                 try:
                     rows[(run, m.name)] = json.loads(read_file_text(row_path))
                     reused += 1
@@ -654,14 +684,14 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
                     pass   # a damaged row is redone
             p = found.get(run)
             tasks.append(_Task(m, run, None if p is None else str(p), str(folder),
-                               None if calib is None else str(calib), odo, evaluation))
+                               None if j.calib is None else str(j.calib), odo, evaluation))
     bar = Progress(len(tasks), desc=f"benchmark {len(methods)} method(s) × {len(chosen)} runs",
-                   unit="runs", enabled=progress and bool(tasks))
-    ex = executor
+                   unit="runs", enabled=j.progress and bool(tasks))
+    ex = j.executor
     try:
         if tasks:
             if ex is None:
-                ex = make_executor(min(jobs or os.cpu_count() or 1, len(tasks)))
+                ex = make_executor(min(j.jobs or os.cpu_count() or 1, len(tasks)))
             for task, res in ex.imap_unordered(run_task, tasks, errors="return"):
                 if isinstance(res, TaskError):
                     rows[(task.run, task.method.name)] = _failed_row(
@@ -672,7 +702,7 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
                     bar.update(1)
     finally:
         bar.close()
-        if ex is not None and executor is None:
+        if ex is not None and j.executor is None:
             ex.close()
     ordered = [rows[(run, m.name)] for run in chosen for m in methods]
     overall = [_summary(m.name, [r for r in ordered if r["method"] == m.name], len(chosen))

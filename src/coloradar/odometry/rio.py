@@ -112,9 +112,9 @@ class RioConfig:
         Roll/pitch uncertainty after aligning while the rig moves [rad] (at rest it follows
         from ``accel_bias_std``).
     anchor_delay
-        The output is anchored at the initial pose with the attitude estimated this many
-        seconds after the start, carried back by the gyro (the first estimate is the least
-        certain) [s].
+        The attitudes of the output's first ``anchor_delay`` seconds are the one estimated
+        then, carried back by the gyro (the first estimates are the least certain), and the
+        output is anchored at the first of them [s].
     max_rejected
         After this many consecutive rejected frames per radar, with no update of any radar
         accepted in between, the filter has lost the radars: its velocity restarts from the
@@ -666,21 +666,28 @@ class _Loop:
             self.out_masks[i] = mask
 
 
-def _anchor_rotation(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndarray
-                     ) -> Rotation:
-    """``world_R_base`` of the first pose in the filter's frame, for anchoring: the first
-    attitude estimate is the least certain (gravity alignment, possibly while moving), so the
-    attitude ``anchor_delay`` seconds later is carried back by the bias-corrected gyro, and a
-    start-up tilt error does not tilt the whole trajectory."""
+def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndarray
+                    ) -> np.ndarray:
+    """The attitudes ``world_R_imu`` of the poses with the first ``anchor_delay`` seconds'
+    replaced by the attitude at ``anchor_delay`` carried back by the bias-corrected gyro.
+
+    The first attitude estimates are the least certain (gravity aligned, possibly while
+    moving); the filter's attitude a few seconds later, carried back, is better (a fixed-lag
+    smoothing of the start). Without it a start-up tilt error of the first pose tilts the
+    whole trajectory once the first poses are put on the truth's."""
     c = int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay))
     c = min(c, len(out_t) - 1)
     if c == 0:
-        return Rotation.from_matrix(out_R[0]) * s.imu_T_base.rotation
+        return out_R
     sel = (s.imu_t > out_t[0]) & (s.imu_t < out_t[c])
-    tg = np.concatenate([[out_t[0]], s.imu_t[sel], [out_t[c]]])
+    tg, inv = np.unique(np.concatenate([out_t[:c + 1], s.imu_t[sel]]), return_inverse=True)
     _, wg = s.ekf.imu_at(tg)
-    back = integrate_gyro(tg, wg, bias=bg[c])[-1]     # imu(t0)_R_imu(tc)
-    return Rotation.from_matrix(out_R[c]) * back.inv() * s.imu_T_base.rotation
+    cum = integrate_gyro(tg, wg, bias=bg[c])            # imu(t_0)_R_imu(t)
+    pos = inv[:c + 1]
+    back = cum[pos].inv() * cum[pos[-1]]                # imu(t_i)_R_imu(t_c)
+    out = out_R.copy()
+    out[:c] = (Rotation.from_matrix(out_R[c]) * back[:c].inv()).as_matrix()
+    return out
 
 
 def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
@@ -695,6 +702,7 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
     out_cov, out_b, out_td = lp.out_cov[done], lp.out_b[done], lp.out_td[done]
     masks = [mk for mk, d in zip(lp.out_masks, done, strict=True) if d] \
         if s.pts is not None else None
+    out_R = _smoothed_start(s, out_t, out_R, out_b[:, 2])
     # world_T_base in the filter's frame, then re-anchored at the initial pose.
     rot_imu = Rotation.from_matrix(out_R)
     rot_base = rot_imu * s.imu_T_base.rotation
@@ -702,7 +710,7 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
     if initial_pose is None:
         initial_pose = (groundtruth.at(out_t[0]) if groundtruth is not None
                         and groundtruth.covers(out_t[:1])[0] else SE3.identity())
-    a_rot = initial_pose.rotation * _anchor_rotation(s, out_t, out_R, out_b[:, 2]).inv()
+    a_rot = initial_pose.rotation * rot_base[0].inv()
     a_t = initial_pose.translation - a_rot.apply(pos_base[0])
     traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
                       f"{s.names[0]} radar-inertial EKF")
