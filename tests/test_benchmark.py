@@ -247,3 +247,52 @@ def test_methods_are_checked_before_anything_runs(tmp_path):
         bm.callable_method(f"{tmp_path / 'm.py'}:fn")
     with pytest.raises(SettingsError, match="method name"):
         bm.Method("a/b", "tum", "x")
+
+
+def _drifting_method(run_path, out_dir, settings):
+    """A function method (the SLAM seam): the ground truth drifting sideways, as TUM."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gt = trajectory_from_groundtruth(open_sequence(run_path))
+    dt = gt.timestamps - gt.timestamps[0]
+    path = out_dir / "slam.txt"
+    write_tum(path, Trajectory(gt.timestamps, gt.translations + np.outer(DRIFT_RATE * dt,
+                                                                         [0, 1, 0]),
+                               gt.rotations, "drift"))
+    return path
+
+
+def test_function_methods_and_the_filter_consistency_column(dataset, tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    root, (run1, _) = dataset
+    res = bm.benchmark(root, tmp_path / "b", methods=[
+        bm.builtin_method(), *bm.function_methods({"slamish": _drifting_method})],
+        runs=[run1], align="origin", odometry={"radar": "single_chip"}, progress=False)
+    rows = {r["method"]: r for r in res.rows}
+    gt = _truth(root, run1)
+    dt = gt.timestamps - gt.timestamps[0]
+    assert rows["slamish"]["final_error_m"] == pytest.approx(DRIFT_RATE * dt[-1], rel=1e-6)
+    assert rows["slamish"]["nees_position"] is None and rows["slamish"]["estimator_s"] > 0
+    # The NEES, recomputed here pose by pose from odometry.json and the ground truth.
+    folder = tmp_path / "b" / "coloradar" / run1
+    info = json.loads((folder / "odometry.json").read_text())["rio"]["poses"]
+    from coloradar.odometry import read_tum
+    est = read_tum(folder / "trajectory.txt")
+    qp, qr = [], []
+    for k, t in enumerate(est.timestamps):
+        if t <= est.timestamps[0] + 1.0 or not gt.covers(np.array([t]))[0]:
+            continue
+        c = np.zeros((6, 6))
+        c[np.triu_indices(6)] = info["covariance_upper"][k]
+        c = c + np.triu(c, 1).T + np.eye(6) * 1e-12
+        p, r = gt.interpolate_arrays(np.array([t]))
+        e = est.translations[k] - p[0]
+        qp.append(e @ np.linalg.solve(c[:3, :3], e) / 3)
+        er = (r[0] * Rotation.from_quat(est.rotations[k].as_quat()).inv()).as_rotvec()
+        qr.append(er @ np.linalg.solve(c[3:, 3:], er) / 3)
+    assert rows["coloradar"]["nees_position"] == pytest.approx(np.mean(qp), rel=1e-2)
+    assert rows["coloradar"]["nees_attitude"] == pytest.approx(np.mean(qr), rel=1e-2)
+    assert "NEES p" in (tmp_path / "b" / "benchmark.txt").read_text()
+    with pytest.raises(SettingsError, match="module-level"):
+        bm.function_method(lambda a, b, c: a)

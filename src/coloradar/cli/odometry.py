@@ -17,7 +17,7 @@ from ..odometry import (
     path_length,
     run_odometry,
 )
-from ..odometry.rio import RioConfig
+from ..odometry.rio import UPDATES, RioConfig
 from ..progress import Progress
 from ._common import check_output_outside_dataset
 
@@ -70,7 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--min-inliers", type=int, help="fewest static points per frame (default 6)")
     p.add_argument("--model", choices=("auto", "3d", "planar"), default="auto",
                    help="estimate vx vy vz (3d) or vx vy with vz = 0 (planar); auto: planar for "
-                        "a radar with fewer than 3 elevation rows (the single chip)")
+                        "a radar with fewer than 3 elevation rows (the single chip); for the "
+                        "filter's Doppler-point update, planar uses the points for vx vy only")
+    p.add_argument("--update", choices=UPDATES, default="doppler",
+                   help="filter: every Doppler point a measurement, gated point by point "
+                        "(doppler, default) or one RANSAC ego-velocity per frame "
+                        "(ego-velocity, loosely coupled)")
     p.add_argument("--gyro-bias-window", type=float, metavar="S",
                    help="dead reckoning: the rig is at rest for the first S seconds of the IMU "
                         "stream: subtract their mean rate as gyro bias")
@@ -100,7 +105,9 @@ def run(args: argparse.Namespace) -> int:
     k = args.imu_noise_scale
     if not (k > 0 and k < float("inf")):
         raise SettingsError(f"--imu-noise-scale must be a positive number, got {k}")
+    planar = None if args.model == "auto" else args.model == "planar"
     rio = replace(base, estimate_time_offset=not args.no_time_offset,
+                  update=args.update, doppler=replace(base.doppler, planar=planar),
                   time_offset=args.time_offset,
                   estimate_extrinsic_rotation=not args.no_extrinsic_rotation,
                   accel_noise_density=base.accel_noise_density * k,

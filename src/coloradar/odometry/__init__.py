@@ -25,6 +25,7 @@ from .dead_reckoning import (
     integrate_gyro,
     radar_inertial_odometry,
 )
+from .doppler import DopplerConfig, PointNoise
 from .ego_velocity import (
     EgoVelocity,
     EgoVelocityConfig,
@@ -58,6 +59,8 @@ from .metrics import (
 from .pipeline import (
     ESTIMATORS,
     SOURCES,
+    EgoVelocityJob,
+    OdometryJob,
     OdometryOutput,
     default_source,
     ego_velocity_config,
@@ -84,11 +87,15 @@ __all__ = [
     "SOURCES",
     "ATEResult",
     "Alignment",
+    "DopplerConfig",
     "EgoVelocity",
     "EgoVelocityConfig",
+    "EgoVelocityJob",
     "EgoVelocityTrack",
     "Evaluation",
+    "OdometryJob",
     "OdometryOutput",
+    "PointNoise",
     "RPEPairing",
     "RPEResult",
     "RioConfig",

@@ -10,7 +10,14 @@ ground truth interpolated at the estimate's timestamps) so that methods compare 
 - a Python callable ``module:function`` (or ``path/to/file.py:function``) taking a
   :class:`coloradar.Sequence` and returning a :class:`~coloradar.geometry.Trajectory`
   (``world_T_base``), or a ``(trajectory, EgoVelocityTrack)`` pair, or an object with
-  ``trajectory`` (and ``track``) attributes: timed like ours.
+  ``trajectory`` (and ``track``) attributes: timed like ours;
+- a function ``fn(run_path, out_dir, settings) -> TUM path`` (:func:`function_method`,
+  :func:`function_methods`): a higher layer's estimator (SLAM) added as a method without this
+  module knowing it; ``settings`` are the benchmark's odometry options.
+
+The filter's rows carry its **consistency**: the mean NEES per degree of freedom of the base
+position and attitude against the ground truth (``nees_position``, ``nees_attitude``; 1 for a
+consistent filter), from the per-pose covariance of ``odometry.json``.
 
 Each (method, run) pair is a task of a :mod:`coloradar.batch` executor (local process pool or
 Dask cluster). Its outputs go to ``OUT/<method>/<run>/`` (the estimate, ``evaluation.json``,
@@ -23,6 +30,7 @@ a row with its error, never the end of the benchmark.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib
 import importlib.util
 import inspect
@@ -55,18 +63,21 @@ from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .evaluation import evaluate_trajectory, evaluation_dict, write_evaluation
 from .metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
-from .pipeline import TRAJECTORY_FILE, VELOCITY_FILE, run_odometry
+from .pipeline import TRAJECTORY_FILE, VELOCITY_FILE, OdometryJob, run_odometry
 from .tum import read_tum, write_tum
 from .velocity_track import EgoVelocityTrack, read_velocity_table, write_velocity_table
 
 __all__ = [
     "BENCHMARK_FILES",
+    "BenchmarkJob",
     "BenchmarkResult",
     "Method",
     "benchmark",
     "builtin_method",
     "callable_method",
     "format_table",
+    "function_method",
+    "function_methods",
     "table_csv",
     "tum_method",
 ]
@@ -80,7 +91,7 @@ _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
 CSV_COLUMNS = ("run", "method", "status", "ate_rmse_m", "ate_rmse_percent", "final_error_m",
                "final_error_percent", "drift_percent", "rotation_drift_deg_per_m",
                "ego_velocity_rmse_m_s", "frames_per_s", "real_time_factor", "poses",
-               "path_length_m", "estimator_s", "error")
+               "path_length_m", "estimator_s", "nees_position", "nees_attitude", "error")
 
 
 @dataclass(frozen=True)
@@ -107,9 +118,9 @@ class Method:
         if not _NAME.match(self.name):
             raise SettingsError(f"method name {self.name!r}: use letters, digits and . _ + - "
                                 "(it names an output folder)")
-        if self.kind not in ("coloradar", "tum", "callable"):
-            raise SettingsError(f"method kind must be coloradar, tum or callable, got "
-                                f"{self.kind!r}")
+        if self.kind not in ("coloradar", "tum", "callable", "function"):
+            raise SettingsError(f"method kind must be coloradar, tum, callable or function, "
+                                f"got {self.kind!r}")
 
 
 def builtin_method(estimator: str | None = None, name: str | None = None) -> Method:
@@ -163,6 +174,69 @@ def callable_method(spec: str, name: str | None = None) -> Method:
     """A Python function ``module:function`` (checked now: it must import)."""
     _load_callable(spec)
     return Method(name or spec.rpartition(":")[2], "callable", spec)
+
+
+def function_method(fn: Callable[[str, Path, dict], str | os.PathLike[str]],
+                    name: str | None = None) -> Method:
+    """A method computed by ``fn(run_path, out_dir, settings)``, which writes its estimate
+    (TUM, ``world_T_base``) and returns the file's path; ``settings`` is the benchmark's
+    odometry options (a dict). ``fn`` must be a module-level function (workers import it)."""
+    mod, qual = getattr(fn, "__module__", None), getattr(fn, "__qualname__", "")
+    if not mod or not qual or "<" in qual:
+        raise SettingsError(f"method {name or fn!r}: a module-level function is needed (worker "
+                            "processes import it by name)")
+    return Method(name or qual, "function", f"{mod}:{qual}")
+
+
+def function_methods(functions: dict[str, Callable[[str, Path, dict],
+                                                   str | os.PathLike[str]]]) -> list[Method]:
+    """:func:`function_method` for each ``name → function`` of a mapping."""
+    return [function_method(fn, name) for name, fn in functions.items()]
+
+
+def _nees(est: Trajectory, reference: Trajectory, folder: Path) -> tuple[float | None, ...]:
+    """Mean NEES per dof of the base position and attitude over the estimate's poses, from the
+    per-pose covariance of the filter's ``odometry.json`` (None when it has none)."""
+    info_path = folder / "odometry.json"
+    if not info_path.is_file():
+        return None, None
+    poses = json.loads(read_file_text(info_path)).get("rio", {}).get("poses", {})
+    upper = poses.get("covariance_upper")
+    if not upper or len(upper) != len(est):
+        return None, None
+    cov = np.zeros((len(est), 6, 6))
+    iu = np.triu_indices(6)
+    cov[:, iu[0], iu[1]] = np.asarray(upper, dtype=np.float64)
+    cov = cov + np.triu(cov, 1).transpose(0, 2, 1)
+    inside = reference.covers(est.timestamps)
+    # The first second is left out: the output is anchored there (covariance ~0).
+    inside &= est.timestamps > est.timestamps[0] + 1.0
+    if inside.sum() < 2:
+        return None, None
+    p_ref, r_ref = reference.interpolate_arrays(est.timestamps[inside])
+    e_p = est.translations[inside] - p_ref
+    e_r = (r_ref * est.rotations[np.flatnonzero(inside)].inv()).as_rotvec()
+    out = []
+    for e, c in ((e_p, cov[inside, :3, :3]), (e_r, cov[inside, 3:, 3:])):
+        c = c + np.eye(3) * 1e-12
+        out.append(float(np.mean(np.einsum("ni,nij,nj->n", e, np.linalg.inv(c), e))) / 3)
+    return out[0], out[1]
+
+
+def _run_function(task: _Task, folder: Path) -> tuple[Trajectory, EgoVelocityTrack | None]:
+    """A :func:`function_method`'s estimate for the task's run."""
+    m = task.method
+    fn = _load_callable(m.spec or "")
+    path = Path(fn(task.path, folder, dict(task.odometry)))
+    if not path.is_file():
+        raise MissingDataError(f"method {m.name}: {path}: no estimate written (expected a TUM "
+                               "file)")
+    est = read_tum(path)
+    if path.resolve() != (folder / TRAJECTORY_FILE).resolve():
+        write_tum(folder / TRAJECTORY_FILE, est, overwrite=True,
+                  comments=[f"run {task.run}, method {m.name} ({m.spec})"])
+    vel = folder / VELOCITY_FILE
+    return est, read_velocity_table(vel) if vel.is_file() else None
 
 
 @dataclass(frozen=True)
@@ -251,9 +325,14 @@ def run_task(task: _Task) -> dict:
                   comments=[f"run {task.run}, method {m.name} ({m.spec})"])
         if track is not None:
             write_velocity_table(folder / VELOCITY_FILE, track, overwrite=True)
+    elif m.kind == "function":
+        t0 = time.perf_counter()
+        est, track = _run_function(task, folder)
+        seconds = time.perf_counter() - t0
     else:
         est, track = _estimate_from_tum(m, task.run)
     reference = trajectory_from_groundtruth(seq)
+    nees_p, nees_r = _nees(est, reference, folder) if m.kind == "coloradar" else (None, None)
     ev_opts = dict(task.evaluation)
     ev = evaluate_trajectory(
         est, reference, track=track, calib=seq.calib, align=ev_opts["align"],
@@ -277,7 +356,8 @@ def run_task(task: _Task) -> dict:
         "frames_per_s": _f(len(est) / seconds) if seconds else None,
         "real_time_factor": _f(span / seconds) if seconds else None,
         "poses": len(est), "path_length_m": _f(ev.ate.path_length),
-        "estimator_s": _f(seconds), "error": "",
+        "estimator_s": _f(seconds), "nees_position": _f(nees_p), "nees_attitude": _f(nees_r),
+        "error": "",
         # Sums for the pooled figures of the summary row.
         "drift_segments": drift.pairs,
         "drift_translation_sum": float(drift.translation_ratios.sum()),
@@ -323,7 +403,9 @@ def _summary(method: str, rows: list[dict], n_runs: int) -> dict:
         "real_time_factor": span / secs if secs else None,
         "poses": sum(r["poses"] for r in ok),
         "path_length_m": sum(r["path_length_m"] or 0.0 for r in ok),
-        "estimator_s": secs if timed else None, "error": "",
+        "estimator_s": secs if timed else None,
+        "nees_position": mean("nees_position"), "nees_attitude": mean("nees_attitude"),
+        "error": "",
     }
 
 
@@ -379,11 +461,11 @@ def format_table(result: BenchmarkResult) -> str:
     """The plain-text table (``benchmark.txt``, what ``coloradar benchmark`` prints)."""
     s = result.settings
     head = ["run", "method", "ATE [m]", "ATE [%]", "final [%]", "drift [%]", "rot [deg/m]",
-            "vel RMSE [m/s]", "frames/s"]
-    fmts = ["", "", ".3f", ".2f", ".2f", ".2f", ".3f", ".3f", ".0f"]
+            "vel RMSE [m/s]", "frames/s", "NEES p", "NEES att"]
+    fmts = ["", "", ".3f", ".2f", ".2f", ".2f", ".3f", ".3f", ".0f", ".2f", ".2f"]
     keys = ["run", "method", "ate_rmse_m", "ate_rmse_percent", "final_error_percent",
             "drift_percent", "rotation_drift_deg_per_m", "ego_velocity_rmse_m_s",
-            "frames_per_s"]
+            "frames_per_s", "nees_position", "nees_attitude"]
 
     def cells(r: dict) -> list[str]:
         if r["status"] == "failed":
@@ -412,7 +494,8 @@ def format_table(result: BenchmarkResult) -> str:
     lengths = ", ".join(f"{x:g}" for x in ev["drift_lengths"])
     rule = line(["-" * w for w in widths])
     out = [f"ATE: RMSE after {ev['align']} alignment; final: end-point error with the first "
-           f"poses coincident; drift: KITTI-style over segments of {lengths} m",
+           f"poses coincident; drift: KITTI-style over segments of {lengths} m; NEES: the "
+           "filter's mean normalised error of position and attitude per dof (consistent: ~1)",
            line(head), rule, *map(line, runs), rule, *map(line, overall)]
     n_ok = len(result.rows) - len(result.failures)
     out.append(f"{n_ok} of {len(result.rows)} run evaluations ok")
@@ -474,9 +557,12 @@ def choose_runs(available: Sequence[str], runs: str | Sequence[str] | None = Non
 
 
 def _check_odometry_options(methods: Sequence[Method], odometry: dict) -> None:
-    params = inspect.signature(run_odometry).parameters
-    bad = [k for k in odometry if k not in params or k in ("seq", "out", "overwrite",
-                                                           "progress", "estimator")]
+    sig = inspect.signature(run_odometry).parameters
+    # run_odometry takes OdometryJob's fields as keywords (**options).
+    params = {f.name for f in dataclasses.fields(OdometryJob)} \
+        if any(p.kind is p.VAR_KEYWORD for p in sig.values()) else set(sig)
+    bad = [k for k in odometry if k not in params or k in ("overwrite", "progress",
+                                                           "estimator")]
     if bad:
         raise SettingsError(f"run_odometry takes no option {', '.join(bad)}")
     if any(m.kind == "coloradar" and m.spec is not None for m in methods) \
@@ -485,15 +571,37 @@ def _check_odometry_options(methods: Sequence[Method], odometry: dict) -> None:
                             "estimator choice")
 
 
+@dataclass(frozen=True, eq=False)
+class BenchmarkJob:
+    """Options of :func:`benchmark` (each also a keyword of it); see its parameters."""
+
+    methods: Sequence[Method] | None = None
+    runs: str | Sequence[str] | None = None
+    split: str | None = None
+    calib: str | os.PathLike[str] | None = None
+    odometry: dict | None = None
+    align: str = "se3"
+    distances: Sequence[float] = (1.0, 2.0, 5.0)
+    drift_lengths: Sequence[float] = DRIFT_LENGTHS
+    rpe_pairing: str = "every_pose"
+    max_gap: float | None = 1.0
+    executor: Any = None
+    jobs: int | None = 1
+    overwrite: bool = False
+    progress: bool = True
+
+    @classmethod
+    def of(cls, job: BenchmarkJob | None = None, **options: Any) -> BenchmarkJob:
+        """``job`` (default: the defaults) with ``options`` replaced."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        bad = sorted(set(options) - names)
+        if bad:
+            raise SettingsError(f"benchmark: unknown option(s) {', '.join(bad)}")
+        return dataclasses.replace(job or cls(), **options)
+
+
 def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
-              methods: Sequence[Method] | None = None, runs: str | Sequence[str] | None = None,
-              split: str | None = None, calib: str | os.PathLike[str] | None = None,
-              odometry: dict | None = None, align: str = "se3",
-              distances: Sequence[float] = (1.0, 2.0, 5.0),
-              drift_lengths: Sequence[float] = DRIFT_LENGTHS,
-              rpe_pairing: str = "every_pose", max_gap: float | None = 1.0,
-              executor=None, jobs: int | None = 1, overwrite: bool = False,
-              progress: bool = True) -> BenchmarkResult:
+              job: BenchmarkJob | None = None, **options: Any) -> BenchmarkResult:
     """Run and evaluate methods on the runs of a dataset; write the table to ``out``.
 
     Parameters
@@ -503,6 +611,8 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
     out
         Output folder: ``<method>/<run>/`` per task, ``benchmark.txt``, ``benchmark.csv``,
         ``benchmark.json``.
+    job, **options
+        :class:`BenchmarkJob`, or its fields as keywords:
     methods
         Default: ``[builtin_method()]`` (our odometry with its default estimator).
     runs, split
@@ -532,30 +642,31 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
     from ..batch.executors import TaskError, make_executor
     from ..progress import Progress
 
+    j = BenchmarkJob.of(job, **options)
     out_p = Path(out)
-    methods = list(methods or [builtin_method()])
+    methods = list(j.methods or [builtin_method()])
     names = [m.name for m in methods]
     if len(set(names)) != len(names):
         raise SettingsError(f"two methods share a name: {', '.join(names)}; name them "
                             "(NAME=…)")
-    if align not in ALIGNMENTS:
-        raise SettingsError(f"align must be one of {', '.join(ALIGNMENTS)}, got {align!r}")
-    if rpe_pairing not in RPE_PAIRINGS:
+    if j.align not in ALIGNMENTS:
+        raise SettingsError(f"align must be one of {', '.join(ALIGNMENTS)}, got {j.align!r}")
+    if j.rpe_pairing not in RPE_PAIRINGS:
         raise SettingsError(f"rpe_pairing must be one of {', '.join(RPE_PAIRINGS)}, got "
-                            f"{rpe_pairing!r}")
-    if any(not d > 0 for d in [*distances, *drift_lengths]) or not drift_lengths:
+                            f"{j.rpe_pairing!r}")
+    if any(not d > 0 for d in [*j.distances, *j.drift_lengths]) or not j.drift_lengths:
         raise SettingsError("segment lengths must be positive (and at least one drift length)")
-    odo = dict(odometry or {})
+    odo = dict(j.odometry or {})
     _check_odometry_options(methods, odo)
     found = _dataset_runs(Path(dataset), out_p)
-    chosen = choose_runs(list(found), runs, split)
-    evaluation = {"align": align, "distances": [float(d) for d in distances],
-                  "drift_lengths": [float(d) for d in drift_lengths],
-                  "rpe_pairing": rpe_pairing, "max_gap": max_gap}
-    settings = {"dataset": str(Path(dataset).resolve()), "runs": chosen, "split": split,
+    chosen = choose_runs(list(found), j.runs, j.split)
+    evaluation = {"align": j.align, "distances": [float(d) for d in j.distances],
+                  "drift_lengths": [float(d) for d in j.drift_lengths],
+                  "rpe_pairing": j.rpe_pairing, "max_gap": j.max_gap}
+    settings = {"dataset": str(Path(dataset).resolve()), "runs": chosen, "split": j.split,
                 "methods": [asdict(m) for m in methods], "odometry": odo,
-                "evaluation": evaluation, "calib": None if calib is None else str(calib)}
-    _claim_output(out_p, settings, overwrite)
+                "evaluation": evaluation, "calib": None if j.calib is None else str(j.calib)}
+    _claim_output(out_p, settings, j.overwrite)
 
     tasks: list[_Task] = []
     rows: dict[tuple[str, str], dict] = {}
@@ -564,7 +675,7 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
         for m in methods:
             folder = out_p / m.name / run
             row_path = folder / ROW_FILE
-            if not overwrite and row_path.is_file():
+            if not j.overwrite and row_path.is_file():
                 try:
                     rows[(run, m.name)] = json.loads(read_file_text(row_path))
                     reused += 1
@@ -573,14 +684,14 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
                     pass   # a damaged row is redone
             p = found.get(run)
             tasks.append(_Task(m, run, None if p is None else str(p), str(folder),
-                               None if calib is None else str(calib), odo, evaluation))
+                               None if j.calib is None else str(j.calib), odo, evaluation))
     bar = Progress(len(tasks), desc=f"benchmark {len(methods)} method(s) × {len(chosen)} runs",
-                   unit="runs", enabled=progress and bool(tasks))
-    ex = executor
+                   unit="runs", enabled=j.progress and bool(tasks))
+    ex = j.executor
     try:
         if tasks:
             if ex is None:
-                ex = make_executor(min(jobs or os.cpu_count() or 1, len(tasks)))
+                ex = make_executor(min(j.jobs or os.cpu_count() or 1, len(tasks)))
             for task, res in ex.imap_unordered(run_task, tasks, errors="return"):
                 if isinstance(res, TaskError):
                     rows[(task.run, task.method.name)] = _failed_row(
@@ -591,7 +702,7 @@ def benchmark(dataset: str | os.PathLike[str], out: str | os.PathLike[str], *,
                     bar.update(1)
     finally:
         bar.close()
-        if ex is not None and executor is None:
+        if ex is not None and j.executor is None:
             ex.close()
     ordered = [rows[(run, m.name)] for run in chosen for m in methods]
     overall = [_summary(m.name, [r for r in ordered if r["method"] == m.name], len(chosen))

@@ -50,6 +50,7 @@ not ok."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -452,37 +453,14 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
         inside = np.all(np.abs(h - prior.velocity)[:, :k_dim] <= rad[:k_dim], axis=1)
         return h[inside]
 
-    all_hyp: np.ndarray | None = None
     cells = _cells(d, cfg.cell_deg)
     _, cell_of, per_cell = np.unique(cells, return_inverse=True, return_counts=True)
     # Each angular cell casts one vote in total: a dense, compact moving object must not
     # outvote the static world spread over the field of view.
     weight = 1.0 / per_cell[cell_of]
-
-    # Extract motions one after the other: static world, then moving objects.
-    models: list[tuple[np.ndarray, np.ndarray]] = []
-    remaining = np.ones(sel.size, dtype=bool)
-    for _ in range(cfg.max_models):
-        rem = np.flatnonzero(remaining)
-        if rem.size < cfg.min_inliers:
-            break
-        hyp = search(d[rem], b[rem])
-        if all_hyp is None:
-            all_hyp = hyp
-        if hyp.shape[0] == 0:
-            if not models:
-                return _failed(n_in, n_valid, f"degenerate geometry: every minimal set of "
-                               f"{cfg.dims} directions drawn is singular (coplanar points)")
-            break
-        v0 = _msac_best(d[rem], b[rem], weight[rem], hyp, cfg.threshold, cfg.max_velocity)
-        v, inl, _ = _refine(d, b, v0, cfg, remaining)
-        if inl.sum() < cfg.min_inliers:
-            break
-        models.append((v, inl))
-        remaining &= ~inl
-    if not models:
-        return _failed(n_in, n_valid, f"no motion supported by {cfg.min_inliers} points "
-                       f"within {cfg.threshold:g} m/s")
+    models, all_hyp, why = _extract_models(d, b, weight, search, cfg)
+    if why:
+        return _failed(n_in, n_valid, why)
 
     support = np.array([m[1].sum() for m in models])
     cover = np.array([np.unique(cells[m[1]]).size for m in models])
@@ -506,30 +484,74 @@ def estimate_ego_velocity(points: np.ndarray, range_rates: np.ndarray | None = N
     cov = np.zeros((3, 3))
     cov[:k, :k] = np.linalg.pinv(a.T @ a)
     cov = sigma**2 * 0.5 * (cov + cov.T)
-    ok, reason = True, ""
     if spread < cfg.min_spread:
-        ok, reason = False, (f"degenerate geometry: the {n} inlier directions leave one velocity "
-                             f"component unobserved (spread {spread:.3g} < {cfg.min_spread:g})")
+        reason = (f"degenerate geometry: the {n} inlier directions leave one velocity "
+                  f"component unobserved (spread {spread:.3g} < {cfg.min_spread:g})")
     elif n < cfg.min_inlier_fraction * n_valid:
-        ok, reason = False, (f"only {n} of {n_valid} points fit the chosen motion (fewer than "
-                             f"{cfg.min_inlier_fraction:g} of them)")
+        reason = (f"only {n} of {n_valid} points fit the chosen motion (fewer than "
+                  f"{cfg.min_inlier_fraction:g} of them)")
     elif prior is not None and np.any(np.abs(v - prior.velocity)[:k]
                                       > prior.radius(cfg.threshold)[:k]):
-        ok, reason = False, (f"the estimate {np.round(v, 2).tolist()} m/s lies outside the "
-                             f"prior's gate around {np.round(prior.velocity, 2).tolist()} m/s")
+        reason = (f"the estimate {np.round(v, 2).tolist()} m/s lies outside the "
+                  f"prior's gate around {np.round(prior.velocity, 2).tolist()} m/s")
     elif period is not None and all_hyp is not None and all_hyp.shape[0]:
-        alt = _alias_alternative(d, b, weight, all_hyp, v, cfg, inl)
-        if alt is not None:
-            v_alt, w_alt = alt
-            w_best = float(weight[inl].sum())
-            if w_alt >= cfg.ambiguity_ratio * w_best:
-                ok, reason = False, (
-                    f"ambiguous: {np.round(v, 2).tolist()} and {np.round(v_alt, 2).tolist()} m/s "
-                    f"explain the range rates about equally (weighted support {w_best:.1f} and "
-                    f"{w_alt:.1f}; Doppler aliasing at ±{cfg.max_velocity:.2f} m/s); give a "
-                    "velocity_prior")
+        reason = _ambiguity(d, b, weight, all_hyp, v, cfg, inl)
+    else:
+        reason = ""
+    ok = not reason
     return EgoVelocity(v, cov, inliers, n_valid, sigma, spread,
                        int(np.unique(cells[inl]).size), len(models), ok, reason)
+
+
+def _extract_models(d: np.ndarray, b: np.ndarray, weight: np.ndarray,
+                    search: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                    cfg: EgoVelocityConfig
+                    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray | None, str]:
+    """Motions extracted one after the other (static world, then moving objects): the
+    ``(velocity, inliers)`` models, the first search's hypotheses, and why there is none
+    (empty when there are models)."""
+    all_hyp: np.ndarray | None = None
+    models: list[tuple[np.ndarray, np.ndarray]] = []
+    remaining = np.ones(d.shape[0], dtype=bool)
+    for _ in range(cfg.max_models):
+        rem = np.flatnonzero(remaining)
+        if rem.size < cfg.min_inliers:
+            break
+        hyp = search(d[rem], b[rem])
+        if all_hyp is None:
+            all_hyp = hyp
+        if hyp.shape[0] == 0:
+            if not models:
+                return [], all_hyp, (f"degenerate geometry: every minimal set of {cfg.dims} "
+                                     "directions drawn is singular (coplanar points)")
+            break
+        v0 = _msac_best(d[rem], b[rem], weight[rem], hyp, cfg.threshold, cfg.max_velocity)
+        v, inl, _ = _refine(d, b, v0, cfg, remaining)
+        if inl.sum() < cfg.min_inliers:
+            break
+        models.append((v, inl))
+        remaining &= ~inl
+    if not models:
+        return [], all_hyp, (f"no motion supported by {cfg.min_inliers} points within "
+                             f"{cfg.threshold:g} m/s")
+    return models, all_hyp, ""
+
+
+def _ambiguity(d: np.ndarray, b: np.ndarray, weight: np.ndarray, hyp: np.ndarray,
+               v: np.ndarray, cfg: EgoVelocityConfig, inl: np.ndarray) -> str:
+    """Why ``v`` is ambiguous under Doppler aliasing (empty when it is not): another
+    velocity keeps ``ambiguity_ratio`` of its weighted support."""
+    alt = _alias_alternative(d, b, weight, hyp, v, cfg, inl)
+    if alt is None:
+        return ""
+    v_alt, w_alt = alt
+    w_best = float(weight[inl].sum())
+    if w_alt < cfg.ambiguity_ratio * w_best:
+        return ""
+    return (f"ambiguous: {np.round(v, 2).tolist()} and {np.round(v_alt, 2).tolist()} m/s "
+            f"explain the range rates about equally (weighted support {w_best:.1f} and "
+            f"{w_alt:.1f}; Doppler aliasing at ±{cfg.max_velocity:.2f} m/s); give a "
+            "velocity_prior")
 
 
 def _alias_alternative(d: np.ndarray, b: np.ndarray, weight: np.ndarray, hyp: np.ndarray,

@@ -21,8 +21,9 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +52,8 @@ __all__ = [
     "SOURCES",
     "TRAJECTORY_FILE",
     "VELOCITY_FILE",
+    "EgoVelocityJob",
+    "OdometryJob",
     "OdometryOutput",
     "default_source",
     "ego_velocity_config",
@@ -115,21 +118,12 @@ def _frames(timestamps: np.ndarray, start: float | None, duration: float | None,
     return idx if max_frames is None else idx[:max_frames]
 
 
-def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
-                     config: EgoVelocityConfig | None = None, processing: dict | None = None,
-                     start: float | None = None, duration: float | None = None,
-                     stride: int = 1, max_frames: int | None = None, seed: int = 0,
-                     progress: Progress | None = None) -> EgoVelocityTrack:
-    """Ego-velocity of one radar for (a window of) a run.
+@dataclass(frozen=True, eq=False)
+class EgoVelocityJob:
+    """Options of :func:`run_ego_velocity` (each also a keyword of it).
 
-    Parameters
+    Attributes
     ----------
-    seq
-        A :class:`coloradar.Sequence`.
-    radar
-        ``"cascade"`` or ``"single_chip"``.
-    source
-        ``"pointclouds"``, ``"adc"`` or ``"heatmaps"``; None: :func:`default_source`.
     config
         Estimator settings; default :func:`ego_velocity_config` of the radar.
     processing
@@ -143,35 +137,74 @@ def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
         RANSAC seed (:func:`~coloradar.odometry.estimate_ego_velocities`).
     progress
         ``progress(done, total)`` after each frame.
+    """
+
+    config: EgoVelocityConfig | None = None
+    processing: dict | None = None
+    start: float | None = None
+    duration: float | None = None
+    stride: int = 1
+    max_frames: int | None = None
+    seed: int = 0
+    progress: Progress | None = None
+
+    @classmethod
+    def of(cls, job: EgoVelocityJob | None = None, **options: Any) -> EgoVelocityJob:
+        """``job`` (default: the defaults) with ``options`` replaced."""
+        return _job_of(cls, job, options)
+
+
+def _job_of(cls: Any, job: Any, options: dict[str, Any]) -> Any:
+    names = {f.name for f in fields(cls)}
+    bad = sorted(set(options) - names)
+    if bad:
+        raise SettingsError(f"unknown option(s) {', '.join(bad)}; expected some of "
+                            f"{', '.join(sorted(names))}")
+    return replace(job or cls(), **options)
+
+
+def run_ego_velocity(seq, radar: str = "cascade", source: str | None = None, *,
+                     job: EgoVelocityJob | None = None, **options: Any) -> EgoVelocityTrack:
+    """Ego-velocity of one radar for (a window of) a run.
+
+    Parameters
+    ----------
+    seq
+        A :class:`coloradar.Sequence`.
+    radar
+        ``"cascade"`` or ``"single_chip"``.
+    source
+        ``"pointclouds"``, ``"adc"`` or ``"heatmaps"``; None: :func:`default_source`.
+    job, **options
+        :class:`EgoVelocityJob` (``config``, ``processing``, ``start``, ``duration``,
+        ``stride``, ``max_frames``, ``seed``, ``progress``), or its fields as keywords.
 
     Returns
     -------
     EgoVelocityTrack
     """
-    return _ego_velocity(seq, radar, source, config=config, processing=processing, start=start,
-                         duration=duration, stride=stride, max_frames=max_frames, seed=seed,
-                         progress=progress)[0]
+    return _ego_velocity(seq, radar, source, EgoVelocityJob.of(job, **options))[0]
 
 
-def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityConfig | None,
-                  processing: dict | None, start: float | None, duration: float | None,
-                  stride: int, max_frames: int | None, seed: int, progress: Progress | None,
+def _ego_velocity(seq, radar: str, source: str | None, job: EgoVelocityJob,
                   still_config: ZeroVelocityConfig | None = None
-                  ) -> tuple[EgoVelocityTrack, np.ndarray]:
-    """:func:`run_ego_velocity`, and per frame whether the radar sees a still world
-    (:func:`~coloradar.odometry.zero_velocity.still_world`, computed on the same clouds)."""
+                  ) -> tuple[EgoVelocityTrack, np.ndarray, list[np.ndarray]]:
+    """:func:`run_ego_velocity`, per frame whether the radar sees a still world
+    (:func:`~coloradar.odometry.zero_velocity.still_world`, computed on the same clouds), and
+    the clouds themselves (float32 ``(N_k, 5)``, for the filter's Doppler-point update)."""
     source = source or default_source(seq, radar)
     if source not in SOURCES:
         raise ColoradarError(f"unknown source {source!r}; expected one of {', '.join(SOURCES)}")
-    stream, convert = radar_point_stream(seq, radar, source, processing=processing)
-    idx = _frames(stream.timestamps, start, duration, stride, max_frames)
+    stream, convert = radar_point_stream(seq, radar, source, processing=job.processing)
+    idx = _frames(stream.timestamps, job.start, job.duration, job.stride, job.max_frames)
     if idx.size == 0:
         raise ColoradarError(f"{seq.name}: no {radar} {source} frames in the chosen window")
-    cfg = config or ego_velocity_config(seq.calib.radar(radar))
+    cfg = job.config or ego_velocity_config(seq.calib.radar(radar))
 
     skipped: dict[int, str] = {}
     still = np.zeros(idx.size, dtype=bool)
     zv = still_config or ZeroVelocityConfig()
+    kept: list[np.ndarray] = []
 
     def clouds() -> Iterator[np.ndarray]:
         for j, k in enumerate(idx):
@@ -180,17 +213,19 @@ def _ego_velocity(seq, radar: str, source: str | None, *, config: EgoVelocityCon
                 # One bad frame gives no estimate for that frame, as `coloradar process`
                 # skips it; the track keeps its time so the trajectory bridges the gap.
                 skipped[j] = f"unreadable frame: {stream.path(int(k))}"
-                yield np.zeros((0, 5), dtype=np.float32)
+                kept.append(np.zeros((0, 5), dtype=np.float32))
+                yield kept[-1]
             else:
                 cloud = convert(frame)
                 still[j] = still_world(cloud, zv, cfg.min_range)
+                kept.append(np.asarray(cloud, dtype=np.float32))
                 yield cloud
 
-    track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=seed,
-                                    frame=radar, progress=progress)
+    track = estimate_ego_velocities(clouds(), stream.timestamps[idx], cfg, seed=job.seed,
+                                    frame=radar, progress=job.progress)
     for j, why in skipped.items():
         track.reasons[j] = why
-    return track, still
+    return track, still, kept
 
 
 def run_path(seq) -> str:
@@ -232,28 +267,17 @@ def _check_output_folder(folder: Path) -> None:
             return
 
 
-def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
-                 source: str | None = None, orientation: str = "imu",
-                 config: EgoVelocityConfig | None = None, processing: dict | None = None,
-                 start: float | None = None, duration: float | None = None, stride: int = 1,
-                 seed: int = 0, gyro_bias_window: float | None = None,
-                 overwrite: bool = False, progress: Progress | None = None,
-                 estimator: str = "rio", rio_config: RioConfig | None = None,
-                 fuse: Sequence[str] | str = "auto") -> OdometryOutput:
-    """Ego-velocity and radar-inertial odometry for a run, written to ``out``.
+@dataclass(frozen=True, eq=False)
+class OdometryJob:
+    """Options of :func:`run_odometry` (each also a keyword of it).
 
-    Parameters
+    Attributes
     ----------
-    seq
-        The run.
-    out
-        Output folder (created); gets ``ego_velocity.csv``, ``trajectory.txt`` (TUM),
-        ``odometry.json`` (and ``ego_velocity_<radar>.csv`` for each radar in ``fuse``).
     radar, source, config, processing, start, duration, stride, seed, progress
-        See :func:`run_ego_velocity`.
+        See :class:`EgoVelocityJob` (``radar``: ``"cascade"`` or ``"single_chip"``).
     estimator
         ``"rio"`` (default): the error-state EKF of :mod:`.rio` (IMU propagation, radar
-        velocity updates, automatic zero-velocity updates, online biases and time offset);
+        updates, automatic zero-velocity updates, online biases and time offset);
         ``"dead-reckoning"``: the baseline of :mod:`.dead_reckoning` (ego-velocities
         integrated with the gyro or ground-truth attitude).
     orientation
@@ -267,43 +291,77 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     rio_config
         Filter settings (:class:`~coloradar.odometry.rio.RioConfig`).
     fuse
-        Further radars whose ego-velocities also update the filter (``"rio"`` only), e.g.
+        Further radars whose frames also update the filter (``"rio"`` only), e.g.
         ``("single_chip",)`` beside the cascade, each with its default source and settings;
         ``"auto"`` (default): the other radar when the run has data of it (the filter fuses
         both radars), none for dead reckoning; ``()``: the one radar only. ``processing``
         applies to ``radar`` only; fused radars use their default processing.
-
-    Returns
-    -------
-    OdometryOutput
-        The initial pose is the ground truth's at the first frame when the run has ground
-        truth (so that the trajectories are comparable without alignment), else the identity.
     """
-    if estimator not in ESTIMATORS:
-        raise SettingsError(f"unknown estimator {estimator!r}; expected one of "
+
+    radar: str = "cascade"
+    source: str | None = None
+    orientation: str = "imu"
+    config: EgoVelocityConfig | None = None
+    processing: dict | None = None
+    start: float | None = None
+    duration: float | None = None
+    stride: int = 1
+    seed: int = 0
+    gyro_bias_window: float | None = None
+    overwrite: bool = False
+    progress: Progress | None = None
+    estimator: str = "rio"
+    rio_config: RioConfig | None = None
+    fuse: Sequence[str] | str = "auto"
+
+    @classmethod
+    def of(cls, job: OdometryJob | None = None, **options: Any) -> OdometryJob:
+        """``job`` (default: the defaults) with ``options`` replaced."""
+        return _job_of(cls, job, options)
+
+    def frames(self, radar: str | None = None) -> EgoVelocityJob:
+        """The ego-velocity options of ``radar`` (default: the main radar's; a fused radar
+        gets its default source, settings and processing)."""
+        main = radar is None or radar == self.radar
+        return EgoVelocityJob(self.config if main else None,
+                              self.processing if main else None, self.start, self.duration,
+                              self.stride, None, self.seed, self.progress if main else None)
+
+
+def _fused_radars(seq, j: OdometryJob) -> tuple[str, ...]:
+    """Check the job's estimator options; the radars fused with ``j.radar``."""
+    if j.estimator not in ESTIMATORS:
+        raise SettingsError(f"unknown estimator {j.estimator!r}; expected one of "
                             f"{', '.join(ESTIMATORS)}")
-    if orientation not in ORIENTATION_SOURCES:
-        raise ColoradarError(f"unknown orientation source {orientation!r}; expected one of "
+    if j.orientation not in ORIENTATION_SOURCES:
+        raise ColoradarError(f"unknown orientation source {j.orientation!r}; expected one of "
                              f"{', '.join(ORIENTATION_SOURCES)}")
+    fuse = j.fuse
     if isinstance(fuse, str):
         if fuse != "auto":
             raise SettingsError(f"fuse must be 'auto' or a list of radars, got {fuse!r}")
-        fuse = tuple(r for r in ("cascade", "single_chip") if r != radar
-                     and default_point_source(seq, r) is not None) if estimator == "rio" else ()
+        fuse = tuple(r for r in ("cascade", "single_chip") if r != j.radar
+                     and default_point_source(seq, r) is not None) if j.estimator == "rio" \
+            else ()
     fuse = tuple(fuse)
-    if estimator == "rio":
-        if orientation != "imu":
+    if j.estimator == "rio":
+        if j.orientation != "imu":
             raise SettingsError("orientation='groundtruth' is a setting of the dead-reckoning "
                                 "baseline (--estimator dead-reckoning); the filter estimates "
                                 "its attitude from the IMU")
-        if gyro_bias_window:
+        if j.gyro_bias_window:
             raise SettingsError("gyro_bias_window (--gyro-bias-window) is a setting of the "
                                 "dead-reckoning baseline; the filter finds rest by itself")
-        bad = [r for r in fuse if r == radar or r not in ("cascade", "single_chip")]
+        bad = [r for r in fuse if r == j.radar or r not in ("cascade", "single_chip")]
         if bad:
-            raise SettingsError(f"fuse: {', '.join(bad)} is not a radar other than {radar}")
+            raise SettingsError(f"fuse: {', '.join(bad)} is not a radar other than {j.radar}")
     elif fuse:
         raise SettingsError("fuse (--fuse) needs the filter (estimator 'rio')")
+    return fuse
+
+
+def _targets(out: str | os.PathLike[str], fuse: tuple[str, ...], overwrite: bool) -> list[Path]:
+    """The output files, refused when they exist (unless ``overwrite``)."""
     folder = Path(out)
     _check_output_folder(folder)
     names = [VELOCITY_FILE, TRAJECTORY_FILE, INFO_FILE] + [f"ego_velocity_{r}.csv" for r in fuse]
@@ -312,73 +370,108 @@ def run_odometry(seq, out: str | os.PathLike[str], *, radar: str = "cascade",
     if existing and not overwrite:
         raise OutputExistsError(f"{folder}: holds {', '.join(existing)} already; pass "
                                 "overwrite=True (--overwrite) to replace them")
+    return targets
+
+
+def _reference_inputs(seq, j: OdometryJob) -> tuple[Trajectory | None, tuple | None]:
+    """The run's ground truth (or None) and, for a gyro attitude, ``(imu_t, rates, bias)``."""
     gt = trajectory_from_groundtruth(seq) if "groundtruth" in seq.available() else None
-    if orientation == "groundtruth" and gt is None:
+    if j.orientation == "groundtruth" and gt is None:
         raise MissingDataError(f"{seq.location}: orientation from ground truth asked for, but "
                                "the run has no ground truth")
-    imu_t = imu_w = bias = None
-    if orientation == "imu":
-        if "imu" not in seq.available():
-            hint = ("the filter needs it; --estimator dead-reckoning --orientation groundtruth "
-                    "works without" if estimator == "rio" else
-                    "use orientation 'groundtruth' (--orientation groundtruth)")
-            raise MissingDataError(f"{seq.location}: the run has no IMU; {hint}")
-        imu_t, imu_w = seq.imu.timestamps, seq.imu.angular_rates
-        if gyro_bias_window:
-            bias = estimate_gyro_bias(imu_t, imu_w, imu_t[0], imu_t[0] + gyro_bias_window)
-    source = source or default_source(seq, radar)
-    cfg = config or ego_velocity_config(seq.calib.radar(radar))
-    rcfg = rio_config or RioConfig()
-    track, still = _ego_velocity(seq, radar, source, config=cfg, processing=processing,
-                                 start=start, duration=duration, stride=stride,
-                                 max_frames=None, seed=seed, progress=progress,
-                                 still_config=rcfg.zero_velocity)
+    if j.orientation != "imu":
+        return gt, None
+    if "imu" not in seq.available():
+        hint = ("the filter needs it; --estimator dead-reckoning --orientation groundtruth "
+                "works without" if j.estimator == "rio" else
+                "use orientation 'groundtruth' (--orientation groundtruth)")
+        raise MissingDataError(f"{seq.location}: the run has no IMU; {hint}")
+    imu_t, imu_w = seq.imu.timestamps, seq.imu.angular_rates
+    bias = estimate_gyro_bias(imu_t, imu_w, imu_t[0], imu_t[0] + j.gyro_bias_window) \
+        if j.gyro_bias_window else None
+    return gt, (imu_t, imu_w, bias)
+
+
+def _filter_run(seq, j: OdometryJob, main: tuple, fuse: tuple[str, ...],
+                gt: Trajectory | None) -> tuple[Trajectory, list[EgoVelocityTrack], dict]:
+    """The filter on the main radar's ``(track, still, clouds)`` and the fused radars':
+    the trajectory, the fused radars' tracks and the ``rio`` entry of ``odometry.json``."""
+    rcfg = j.rio_config or RioConfig()
+    tracks, stills, clouds = [main[0]], [main[1]], [main[2]]
+    for r in fuse:
+        tr_r, st_r, cl_r = _ego_velocity(seq, r, None, j.frames(r), rcfg.zero_velocity)
+        tracks.append(tr_r)
+        stills.append(st_r)
+        clouds.append(cl_r)
+    res = rio_odometry(tracks, seq.calib, seq.imu.timestamps, seq.imu.data,
+                       radars=(j.radar, *fuse), config=rcfg, groundtruth=gt, still=stills,
+                       points=clouds)
+    return res.trajectory, tracks[1:], rio_summary(res, rcfg)
+
+
+def run_odometry(seq, out: str | os.PathLike[str], *, job: OdometryJob | None = None,
+                 **options: Any) -> OdometryOutput:
+    """Ego-velocity and radar-inertial odometry for a run, written to ``out``.
+
+    Parameters
+    ----------
+    seq
+        The run.
+    out
+        Output folder (created); gets ``ego_velocity.csv``, ``trajectory.txt`` (TUM),
+        ``odometry.json`` (and ``ego_velocity_<radar>.csv`` for each fused radar).
+    job, **options
+        :class:`OdometryJob`, or its fields as keywords (``radar``, ``source``,
+        ``estimator``, ``orientation``, ``rio_config``, ``fuse``, ``overwrite``…).
+
+    Returns
+    -------
+    OdometryOutput
+        The initial pose is the ground truth's at the first frame when the run has ground
+        truth (so that the trajectories are comparable without alignment), else the identity.
+    """
+    j = OdometryJob.of(job, **options)
+    fuse = _fused_radars(seq, j)
+    targets = _targets(out, fuse, j.overwrite)
+    gt, gyro = _reference_inputs(seq, j)
+    source = j.source or default_source(seq, j.radar)
+    cfg = j.config or ego_velocity_config(seq.calib.radar(j.radar))
+    rcfg = j.rio_config or RioConfig()
+    main = _ego_velocity(seq, j.radar, source, replace(j.frames(), config=cfg),
+                         rcfg.zero_velocity)
+    track = main[0]
     info: dict = {
-        "run": run_path(seq),
-        "run_name": seq.name,
+        "run": run_path(seq), "run_name": seq.name,
         "calib": str(getattr(seq.calib, "source", "preset")),
-        "radar": radar,
-        "source": source,
-        "estimator": estimator,
-        "orientation": orientation,
-        "frames": len(track),
-        "frames_ok": int(track.ok.sum()),
-        "start": start, "duration": duration, "stride": stride, "seed": seed,
-        "gyro_bias": None if bias is None else [float(b) for b in bias],
+        "radar": j.radar, "source": source, "estimator": j.estimator,
+        "orientation": j.orientation, "frames": len(track), "frames_ok": int(track.ok.sum()),
+        "start": j.start, "duration": j.duration, "stride": j.stride, "seed": j.seed,
+        "gyro_bias": None if gyro is None or gyro[2] is None else [float(b) for b in gyro[2]],
         "initial_pose": "groundtruth" if gt is not None else "identity",
-        "config": asdict(cfg),
-        "processing": processing or {},
+        "config": asdict(cfg), "processing": j.processing or {},
         "coloradar_version": __version__,
     }
     extra: list[EgoVelocityTrack] = []
-    if estimator == "rio":
-        tracks, stills = [track], [still]
-        for r in fuse:
-            tr_r, st_r = _ego_velocity(seq, r, None, config=None, processing=None,
-                                       start=start, duration=duration, stride=stride,
-                                       max_frames=None, seed=seed, progress=None,
-                                       still_config=rcfg.zero_velocity)
-            tracks.append(tr_r)
-            stills.append(st_r)
-            extra.append(tr_r)
-        res = rio_odometry(tracks, seq.calib, seq.imu.timestamps, seq.imu.data,
-                           radars=(radar, *fuse), config=rcfg, groundtruth=gt, still=stills)
-        traj = res.trajectory
+    if j.estimator == "rio":
+        traj, extra, info["rio"] = _filter_run(seq, j, main, fuse, gt)
         info["fuse"] = list(fuse)
-        info["rio"] = rio_summary(res, rcfg)
-        what = "radar-inertial EKF (IMU propagation, radar velocity updates)"
+        what = ("radar-inertial EKF (IMU propagation, Doppler-point updates)"
+                if rcfg.update == "doppler" else
+                "radar-inertial EKF (IMU propagation, radar velocity updates)")
     else:
-        traj = radar_inertial_odometry(track, seq.calib, orientation=orientation,
+        imu_t, imu_w, bias = gyro if gyro is not None else (None, None, None)
+        traj = radar_inertial_odometry(track, seq.calib,
+                                       orientation=j.orientation,  # type: ignore[arg-type]
                                        imu_timestamps=imu_t, imu_rates=imu_w, groundtruth=gt,
-                                       gyro_bias=bias, radar=radar)
-        what = f"radar ego-velocity + {orientation} attitude (dead reckoning)"
-    comments = [f"run {seq.name}, {radar} radar, source {source}"]
-    make_output_dir(folder)
-    write_velocity_table(targets[0], track, comments=comments, overwrite=overwrite)
+                                       gyro_bias=bias, radar=j.radar)
+        what = f"radar ego-velocity + {j.orientation} attitude (dead reckoning)"
+    comments = [f"run {seq.name}, {j.radar} radar, source {source}"]
+    make_output_dir(targets[0].parent)
+    write_velocity_table(targets[0], track, comments=comments, overwrite=j.overwrite)
     for r, tr_r, path in zip(fuse, extra, targets[3:], strict=True):
         write_velocity_table(path, tr_r, comments=[f"run {seq.name}, {r} radar (fused)"],
-                             overwrite=overwrite)
-    write_tum(targets[1], traj, overwrite=overwrite, comments=[
+                             overwrite=j.overwrite)
+    write_tum(targets[1], traj, overwrite=j.overwrite, comments=[
         *comments, f"world_T_base from {what}"])
     atomic_write_text(targets[2], json.dumps(info, indent=2) + "\n")
-    return OdometryOutput(folder, track, traj, targets)
+    return OdometryOutput(targets[0].parent, track, traj, targets)

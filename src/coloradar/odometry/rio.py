@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.integrate import trapezoid  # numpy.trapezoid needs numpy >= 2
@@ -39,12 +39,17 @@ from ..calib import Calibration
 from ..errors import ColoradarError, DataWarning, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base
 from .dead_reckoning import integrate_gyro
+from .doppler import DopplerConfig, PointNoise, doppler_points_index, doppler_update, point_noise_for
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
 from .velocity_track import EgoVelocityTrack
 from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames
 
-__all__ = ["RioConfig", "RioResult", "rio_odometry", "rio_summary"]
+__all__ = ["UPDATES", "RioConfig", "RioResult", "rio_odometry", "rio_summary"]
+
+UPDATES = ("doppler", "ego-velocity")
+"""Radar updates of the filter: every Doppler point a scalar measurement (tightly coupled,
+the default, :mod:`.doppler`) or one RANSAC ego-velocity per frame (loosely coupled)."""
 
 _G0 = 9.80665
 _DEG = np.pi / 180.0
@@ -88,6 +93,10 @@ class RioConfig:
         the wrong time, and their error goes into the biases and rotations.
     estimate_extrinsic_rotation
         Estimate each radar's rotation relative to the IMU online (the calibration's as prior).
+    extrinsic_warmup
+        Seconds after the start during which that rotation is held at the calibration's [s]:
+        the start's attitude errors (gravity aligned while moving) would otherwise be taken
+        for a mounting error and kept.
     extrinsic_rotation_std
         Prior uncertainty of that rotation [rad].
     zero_velocity
@@ -103,13 +112,25 @@ class RioConfig:
         Roll/pitch uncertainty after aligning while the rig moves [rad] (at rest it follows
         from ``accel_bias_std``).
     anchor_delay
-        The output is anchored at the initial pose with the attitude estimated this many
-        seconds after the start, carried back by the gyro (the first estimate is the least
-        certain) [s].
+        The attitudes of the output's first ``anchor_delay`` seconds are the one estimated
+        then, carried back by the gyro (the first estimates are the least certain), and the
+        output is anchored at the first of them [s].
     max_rejected
         After this many consecutive rejected frames per radar, with no update of any radar
         accepted in between, the filter has lost the radars: its velocity restarts from the
         next frame's measurement (counted as ``resets``).
+    update
+        ``"doppler"`` (default): the tightly coupled update, each Doppler point of a frame a
+        scalar residual gated on its own (:mod:`.doppler`), when the frames' points are given
+        (``points`` of :func:`rio_odometry`); the frame's RANSAC ego-velocity only when too
+        few points pass the gate. ``"ego-velocity"``: one RANSAC ego-velocity per frame
+        (loosely coupled, the literature's baseline). Chosen on the tuning runs of
+        ``benchmarks/mc_odometry.py`` (docs/odometry.md).
+    doppler
+        Settings of the Doppler-point update.
+    point_noise
+        Per radar (in the order of the tracks) the points' noise; None: each radar's default
+        (:func:`~coloradar.odometry.doppler.point_noise_for`).
     """
 
     accel_noise_density: float = 100e-6 * _G0
@@ -125,6 +146,7 @@ class RioConfig:
     time_offset: float = 0.0
     time_offset_std: float = 0.05
     time_offset_warmup: float = 0.0
+    extrinsic_warmup: float = 0.0
     estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
@@ -134,6 +156,9 @@ class RioConfig:
     moving_tilt_std: float = 3.0 * _DEG
     max_rejected: int = 5
     anchor_delay: float = 5.0
+    update: str = "doppler"
+    doppler: DopplerConfig = field(default_factory=DopplerConfig)
+    point_noise: tuple[PointNoise, ...] | None = None
 
     def __post_init__(self) -> None:
         for name in ("accel_noise_density", "gyro_noise_density", "accel_bias_walk",
@@ -141,6 +166,7 @@ class RioConfig:
                      "velocity_noise_floor", "velocity_noise_scale", "time_offset_std",
                      "extrinsic_rotation_std",
                      "planar_vz_std", "zupt_std", "align_window", "time_offset_warmup",
+                     "extrinsic_warmup",
                      "anchor_delay", "moving_tilt_std"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
@@ -149,6 +175,9 @@ class RioConfig:
             raise SettingsError(f"max_rejected must be >= 1, got {self.max_rejected}")
         if not 0 < self.gate_probability <= 1:
             raise SettingsError(f"gate_probability must be in (0, 1], got {self.gate_probability}")
+        if self.update not in UPDATES:
+            raise SettingsError(f"unknown radar update {self.update!r}; expected one of "
+                                f"{', '.join(UPDATES)}")
 
     @property
     def noise(self) -> ImuNoise:
@@ -185,7 +214,15 @@ class RioResult:
         bool ``(M,)``: frames found static (zero-velocity update applied).
     stats
         Counts per radar: ``updates``, ``rejected``, ``zupts``, ``failed`` (no ego-velocity),
-        ``resets`` (velocity restarted after ``max_rejected`` rejections in a row).
+        ``resets`` (velocity restarted after ``max_rejected`` rejections in a row),
+        ``point_updates`` (frames updated point by point), ``points`` and ``points_used``
+        (points offered to and passed by the per-point gate).
+    velocity_covariance
+        float64 ``(M, 3, 3)``: covariance of ``velocity`` [m²/s²], output world frame.
+    static_points
+        Per output pose, bool over the rows of the first radar's cloud: the points the
+        per-point gate took as static (None where the frame had no point update, or the
+        filter ran without points).
     """
 
     trajectory: Trajectory
@@ -202,6 +239,8 @@ class RioResult:
     radars: tuple[str, ...]
     static: np.ndarray
     stats: dict[str, dict[str, int]]
+    velocity_covariance: np.ndarray | None = None
+    static_points: list[np.ndarray | None] | None = None
 
 
 def _planar(track: EgoVelocityTrack) -> bool:
@@ -237,6 +276,34 @@ def _radar_noise(cov: np.ndarray, scale: float, floor: float) -> np.ndarray:
     return scale**2 * cov + floor**2 * np.eye(3)
 
 
+def _default_noise(calib: Calibration, radar: str) -> PointNoise:
+    """The radar's point noise from its waveform (Doppler bin, ``v_max``) when the
+    calibration knows it, else the defaults of :func:`point_noise_for`."""
+    try:
+        w = calib.radar(radar).waveform
+    except (ColoradarError, KeyError, AttributeError):
+        return point_noise_for(radar)
+    return point_noise_for(radar, float(w.velocity_bin_width), float(w.max_velocity))
+
+
+def _prepare_points(points: Sequence[Sequence[np.ndarray]] | None,
+                    tracks: Sequence[EgoVelocityTrack], cfg: RioConfig
+                    ) -> list[list[tuple[np.ndarray, np.ndarray, int]]] | None:
+    """Per radar, per frame: the usable points ``(K, 4)`` (:func:`.doppler.doppler_points`),
+    their rows in the cloud and the cloud's size; None when the update is loosely coupled."""
+    if points is None or cfg.update != "doppler":
+        return None
+    if len(points) != len(tracks):
+        raise SettingsError(f"{len(tracks)} tracks but point clouds of {len(points)} radars")
+    out = []
+    for tr, clouds in zip(tracks, points, strict=True):
+        if len(clouds) != len(tr):
+            raise SettingsError(f"{tr.frame}: {len(tr)} frames but {len(clouds)} point clouds")
+        out.append([(*doppler_points_index(c, cfg.doppler.min_range), int(np.shape(c)[0]))
+                    for c in clouds])
+    return out
+
+
 def _consistent(track: EgoVelocityTrack, k: int, j: int, ekf: ErrorStateEKF, t_ir: np.ndarray,
                 r_ir: np.ndarray, td: float, floor: float, gate: float, scale: float = 1.0
                 ) -> bool:
@@ -265,12 +332,406 @@ def _consistent(track: EgoVelocityTrack, k: int, j: int, ekf: ErrorStateEKF, t_i
     return bool(np.linalg.norm(uj - uk - integral) <= _G0 * (tb - ta) + gate * sigma)
 
 
+@dataclass(eq=False)
+class _Setup:
+    """What a run of the filter works with: inputs checked, the filter built (its nominal
+    calibration states set), per radar the frames found static and the points prepared."""
+
+    cfg: RioConfig
+    tracks: list[EgoVelocityTrack]
+    names: tuple[str, ...]
+    imu_t: np.ndarray
+    imu: np.ndarray
+    ekf: ErrorStateEKF
+    imu_T_base: SE3
+    ext: list[SE3]
+    t_ir: list[np.ndarray]
+    planar: list[bool]
+    pts: list[list[tuple[np.ndarray, np.ndarray, int]]] | None
+    noises: tuple[PointNoise, ...]
+    dcfg: list[DopplerConfig]
+    ext_planar: list[bool]
+    static: list[np.ndarray]
+
+
+def _check_imu(imu_timestamps: np.ndarray, imu_data: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    imu_t = np.asarray(imu_timestamps, dtype=np.float64).reshape(-1)
+    imu = np.asarray(imu_data, dtype=np.float64)
+    if imu.shape != (imu_t.size, 6):
+        raise SettingsError(f"expected IMU data of shape ({imu_t.size}, 6), got {imu.shape}")
+    good_imu = np.all(np.isfinite(imu), axis=1) & np.isfinite(imu_t)
+    imu_t, imu = imu_t[good_imu], imu[good_imu]
+    if imu_t.size < 10 or np.any(np.diff(imu_t) <= 0):
+        raise ColoradarError("radar-inertial odometry needs an IMU stream of at least 10 "
+                             "samples with strictly increasing timestamps")
+    return imu_t, imu
+
+
+def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
+           imu: tuple[np.ndarray, np.ndarray], radars: Sequence[str] | None, cfg: RioConfig,
+           still: Sequence[np.ndarray] | None, points: Sequence[Sequence[np.ndarray]] | None
+           ) -> _Setup:
+    """Check the inputs of :func:`rio_odometry` and build what its filter runs on."""
+    tr_list = [tracks] if isinstance(tracks, EgoVelocityTrack) else list(tracks)
+    if not tr_list:
+        raise SettingsError("rio_odometry needs at least one ego-velocity track")
+    names = tuple(radars) if radars is not None else tuple(t.frame for t in tr_list)
+    if len(names) != len(tr_list):
+        raise SettingsError(f"{len(tr_list)} tracks but {len(names)} radar names")
+    imu_t, imu_d = _check_imu(*imu)
+    n_r = len(tr_list)
+    ekf = ErrorStateEKF(imu_t, imu_d[:, :3], imu_d[:, 3:], cfg.noise, n_r)
+    base_T_imu = sensor_to_base(calib, "imu")
+    ext = [base_T_imu.inverse() @ sensor_to_base(calib, n) for n in names]
+    for r, e in enumerate(ext):
+        ekf.R_ir[r] = e.rotation.as_matrix()
+        ekf.td[r] = cfg.time_offset
+    planar = [_planar(t) for t in tr_list]
+    pts = _prepare_points(points, tr_list, cfg)
+    noises = cfg.point_noise or tuple(_default_noise(calib, n) for n in names)
+    if len(noises) != n_r:
+        raise SettingsError(f"{n_r} radars but {len(noises)} point noises")
+    # Per radar: the points inform v_z unless the radar's model is planar (DopplerConfig).
+    dcfg = [replace(cfg.doppler, planar=p if cfg.doppler.planar is None else cfg.doppler.planar)
+            for p in planar]
+    # Radars whose points observe v_z see the extrinsic's roll and pitch as well.
+    ext_planar = [p and (pts is None or bool(d.planar)) for p, d in zip(planar, dcfg, strict=True)]
+    zv = cfg.zero_velocity
+    static = []
+    for r, tr in enumerate(tr_list):
+        quiet = imu_quiet(imu_t, imu_d[:, :3], imu_d[:, 3:], tr.timestamps + cfg.time_offset, zv)
+        static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv,
+                                    None if still is None else still[r]))
+    return _Setup(cfg, tr_list, names, imu_t, imu_d, ekf, base_T_imu.inverse(), ext,
+                  [e.translation for e in ext], planar, pts, noises, dcfg, ext_planar, static)
+
+
+def _first_frame(s: _Setup) -> tuple[int, np.ndarray, np.ndarray, float]:
+    """The first usable frame of the first radar (a moving one only if the next frame
+    corroborates it): its index, the frames inside the IMU's span, those measured, and the
+    3-dof gate in standard deviations."""
+    cfg, prim, ekf = s.cfg, s.tracks[0], s.ekf
+    inside = (prim.timestamps + cfg.time_offset >= s.imu_t[0]) & \
+             (prim.timestamps + cfg.time_offset <= s.imu_t[-1])
+    measured = prim.ok & np.all(np.isfinite(prim.velocity), axis=1)
+    usable = np.flatnonzero(inside & (measured | s.static[0]))
+    if usable.size == 0:
+        raise ColoradarError(f"{prim.frame}: no radar frame with a usable ego-velocity lies "
+                             "within the IMU's time span; nothing to filter")
+    gate_sigma = float(np.sqrt(chi2.ppf(cfg.gate_probability, 3))) \
+        if cfg.gate_probability < 1 else np.inf
+    meas = np.flatnonzero(inside & measured)
+
+    def corroborated(k: int) -> bool:
+        # A moving start takes the frame's velocity as the filter's: the next measured frame
+        # must agree with it as far as the IMU allows (see _consistent).
+        nxt = meas[meas > k]
+        return s.static[0][k] or nxt.size == 0 or _consistent(
+            prim, k, int(nxt[0]), ekf, s.t_ir[0], ekf.R_ir[0], cfg.time_offset,
+            cfg.velocity_noise_floor, gate_sigma, cfg.velocity_noise_scale)
+
+    k0 = next((int(k) for k in usable if corroborated(int(k))), int(usable[0]))
+    if k0 > 0 or not inside.all():
+        dropped = int(k0 + (~inside[k0:]).sum())
+        warnings.warn(f"{prim.frame}: {dropped} of {len(prim)} radar frames lie before the "
+                      "first usable one or outside the IMU's time span; left out",
+                      DataWarning, stacklevel=4)
+    return k0, inside, measured, gate_sigma
+
+
+def _initialise(s: _Setup) -> tuple[int, float, np.ndarray]:
+    """Set the filter's state and covariance at the first usable frame: returns its index,
+    its IMU time and the initial variances (the calibration states' kept for their
+    warm-up)."""
+    cfg, prim, ekf, imu_t = s.cfg, s.tracks[0], s.ekf, s.imu_t
+    k0, inside, measured, gate_sigma = _first_frame(s)
+    t0 = float(prim.timestamps[k0] + cfg.time_offset)
+    half = cfg.align_window / 2
+    win = np.flatnonzero((imu_t >= t0 - half) & (imu_t <= t0 + half))
+    if win.size < 5:
+        win = np.argsort(np.abs(imu_t - t0))[:10]
+    f_win, w_win = s.imu[win, :3], s.imu[win, 3:]
+    ekf.t = t0
+    P0 = np.zeros(ekf.dim)
+    if s.static[0][k0]:
+        ekf.R = gravity_alignment(f_win)
+        ekf.bg = w_win.mean(axis=0)
+        ekf.v = np.zeros(3)
+        tilt = cfg.accel_bias_std / _G0
+        P0[V] = cfg.zupt_std**2
+        # The mean of white rate noise over the window, plus a floor for residual motion.
+        span = max(float(np.ptp(imu_t[win])), 1e-3)
+        P0[BG] = cfg.gyro_noise_density**2 / span + (2e-4) ** 2
+    else:
+        tt = prim.timestamps + cfg.time_offset
+        sel = np.flatnonzero(measured & inside & (tt >= t0) & (tt <= t0 + cfg.align_window))
+        sel = np.array([j for j in sel if j == k0 or _consistent(
+            prim, k0, int(j), ekf, s.t_ir[0], ekf.R_ir[0], cfg.time_offset,
+            cfg.velocity_noise_floor, gate_sigma, cfg.velocity_noise_scale)], dtype=np.int64)
+        u0, a_b = _initial_motion(prim, sel, ekf, s.t_ir[0], ekf.R_ir[0], cfg.time_offset)
+        ekf.R = gravity_alignment(f_win, a_b)
+        ekf.v = ekf.R @ u0
+        tilt = cfg.moving_tilt_std
+        vstd = np.sqrt(cfg.velocity_noise_scale**2 * np.max(np.diag(prim.covariance[k0]))
+                       + cfg.velocity_noise_floor**2)
+        P0[V] = vstd**2
+        P0[BG] = cfg.gyro_bias_std**2
+    P0[P] = 1e-12
+    P0[TH] = [tilt**2, tilt**2, (1e-3) ** 2]
+    P0[BA] = cfg.accel_bias_std**2
+    for r in range(len(s.tracks)):
+        if cfg.estimate_extrinsic_rotation:
+            # A planar ego-velocity (v_x, v_y only) sees the radar's yaw, not its roll and
+            # pitch: those would only wander, so they stay at the calibration's.
+            sl = ekf.phi_slice(r)
+            P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if s.ext_planar[r] \
+                else cfg.extrinsic_rotation_std**2
+    ekf.P = np.diag(P0)
+    for r in range(len(s.tracks)):
+        ekf.P[ekf.phi_slice(r), ekf.phi_slice(r)] = 0.0      # until extrinsic_warmup
+    return k0, t0, P0
+
+
+class _Loop:
+    """The event loop: every radar frame in time order, its update, the output poses."""
+
+    def __init__(self, s: _Setup, k0: int, t0: float, P0: np.ndarray):
+        self.s, self.k0, self.t0, self.P0 = s, k0, t0, P0
+        n_r = len(s.tracks)
+        m = len(s.tracks[0]) - k0
+        self.out_t = np.full(m, np.nan)
+        self.out_R = np.zeros((m, 3, 3))
+        self.out_p = np.zeros((m, 3))
+        self.out_v = np.zeros((m, 3))
+        self.out_cov = np.zeros((m, 6, 6))
+        self.out_b = np.zeros((m, 4, 3))
+        self.out_td = np.zeros((m, 2, n_r))
+        self.out_vcov = np.zeros((m, 3, 3))
+        self.out_masks: list[np.ndarray | None] = [None] * m
+        self.stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0,
+                          "point_updates": 0, "points": 0, "points_used": 0} for n in s.names}
+        cfg = s.cfg
+        self.gate3 = float(chi2.ppf(cfg.gate_probability, 3)) if cfg.gate_probability < 1 \
+            else None
+        self.last_zaru = t0
+        self.last_out = -np.inf
+        self.rejected_run = 0                     # radar frames rejected since any acceptance
+        self.td_on = np.zeros(n_r, dtype=bool)
+        self.ext_on = np.zeros(n_r, dtype=bool)
+
+    def events(self) -> Iterator[tuple[float, int, int]]:
+        """Frames in the order of their IMU times ``stamp + t_d[r]`` under the current
+        offsets: the radars' offsets differ, so stamp order is not time order, and a frame
+        taken after the filter has passed its time would be evaluated late."""
+        s, ekf = self.s, self.s.ekf
+        # Frames of the other radars from before the start are old news: left out.
+        queues = [np.array([k for k in range(len(tr)) if (
+            k >= self.k0 if r == 0 else tr.timestamps[k] + s.cfg.time_offset >= self.t0)],
+            dtype=np.int64) for r, tr in enumerate(s.tracks)]
+        pos = [0] * len(queues)
+        while True:
+            cand = [(float(s.tracks[r].timestamps[q[pos[r]]] + ekf.td[r]), r)
+                    for r, q in enumerate(queues) if pos[r] < q.size]
+            if not cand:
+                return
+            r = min(cand)[1]
+            k = int(queues[r][pos[r]])
+            pos[r] += 1
+            yield float(s.tracks[r].timestamps[k]), r, k
+
+    def run(self) -> None:
+        """Propagate to each frame and update with it."""
+        s, ekf = self.s, self.s.ekf
+        for stamp, r, k in self.events():
+            want = stamp + ekf.td[r]
+            tau = max(want, ekf.t)
+            if r == 0 and tau <= self.last_out:
+                tau = self.last_out + 1e-6        # poses strictly in time order
+            if tau > s.imu_t[-1]:
+                break
+            ekf.propagate(tau)
+            self._release_calibration(r, tau)
+            st = self.stats[s.names[r]]
+            used = None
+            if s.pts is not None and not s.static[r][k] and s.pts[r][k][0].shape[0]:
+                used = doppler_update(ekf, r, s.t_ir[r], s.pts[r][k][0], s.noises[r],
+                                      s.dcfg[r], min(want - tau, 0.0))
+                st["points"] += s.pts[r][k][0].shape[0]
+            if s.static[r][k]:
+                self._zero_velocity(tau, st)
+            elif used is not None:
+                st["updates"] += 1
+                st["point_updates"] += 1
+                st["points_used"] += int(used.sum())
+                self.rejected_run = 0
+                self.last_zaru = tau
+            elif s.tracks[r].ok[k] and np.all(np.isfinite(s.tracks[r].velocity[k])):
+                self._ego_velocity(r, k, want, tau, st)
+            else:
+                st["failed"] += 1
+            if r == 0:
+                self._record(k - self.k0, tau, k, used)
+
+    def _release_calibration(self, r: int, tau: float) -> None:
+        """Start estimating radar ``r``'s time offset and extrinsic rotation after their
+        warm-ups: right after the start, errors of the initial state would be read as them."""
+        ekf, cfg = self.s.ekf, self.s.cfg
+        if cfg.estimate_time_offset and not self.td_on[r] \
+                and tau - self.t0 >= cfg.time_offset_warmup:
+            j = ekf.td_index(r)
+            ekf.P[j, :] = ekf.P[:, j] = 0.0
+            ekf.P[j, j] = cfg.time_offset_std**2
+            self.td_on[r] = True
+        if cfg.estimate_extrinsic_rotation and not self.ext_on[r] \
+                and tau - self.t0 >= cfg.extrinsic_warmup:
+            sl = ekf.phi_slice(r)
+            ekf.P[sl, :] = ekf.P[:, sl] = 0.0
+            ekf.P[sl, sl] = np.diag(self.P0[sl])
+            self.ext_on[r] = True
+
+    def _zero_velocity(self, tau: float, st: dict[str, int]) -> None:
+        """A static frame: zero-velocity update and zero-rate update of the gyro bias."""
+        s, ekf, cfg = self.s, self.s.ekf, self.s.cfg
+        H = np.zeros((3, ekf.dim))
+        H[:, V] = np.eye(3)
+        acc, _ = ekf.update(-ekf.v, H, np.eye(3) * cfg.zupt_std**2, self.gate3)
+        self.rejected_run = 0 if acc else self.rejected_run
+        sel = (s.imu_t > self.last_zaru) & (s.imu_t <= tau)
+        if sel.sum() >= 3:
+            Hg = np.zeros((3, ekf.dim))
+            Hg[:, BG] = np.eye(3)
+            span = max(tau - self.last_zaru, 1e-3)
+            z = s.imu[sel, 3:].mean(axis=0)
+            # The mean of white rate noise over `span` seconds, plus a floor for the rig's
+            # residual motion.
+            Rg = np.eye(3) * (cfg.gyro_noise_density**2 / span + (2e-4) ** 2)
+            ekf.update(z - ekf.bg, Hg, Rg, self.gate3)
+        self.last_zaru = tau
+        st["zupts" if acc else "rejected"] += 1
+
+    def _ego_velocity(self, r: int, k: int, want: float, tau: float,
+                      st: dict[str, int]) -> None:
+        """The frame's RANSAC ego-velocity as one 3-D measurement (loosely coupled), and the
+        restart of the velocity once every radar's frames have been rejected for a while."""
+        s, ekf, cfg = self.s, self.s.ekf, self.s.cfg
+        tr = s.tracks[r]
+        y, H = ekf.radar_velocity_model(r, s.t_ir[r])
+        if want < tau:
+            # The frame's time has passed (its offset was corrected since it was queued): the
+            # prediction at `want`, to first order (the offset column is dy/dt).
+            y = y + (want - tau) * H[:, ekf.td_index(r)]
+        C = _radar_noise(tr.covariance[k], cfg.velocity_noise_scale, cfg.velocity_noise_floor)
+        if s.planar[r]:
+            # v_z is not measured: the planar model's assumption v_z = 0, loosely.
+            C[2, :] = C[:, 2] = 0.0
+            C[2, 2] = cfg.planar_vz_std**2
+        acc, _ = ekf.update(tr.velocity[k] - y, H, C, self.gate3)
+        st["updates" if acc else "rejected"] += 1
+        self.rejected_run = 0 if acc else self.rejected_run + 1
+        if self.rejected_run >= cfg.max_rejected * len(s.tracks):
+            # The filter has lost the radars (every frame of every radar for a while is an
+            # outlier): restart the velocity from this one, with its uncertainty.
+            w, _ = ekf.angular_state(tau)
+            u = ekf.R_ir[r] @ tr.velocity[k] - np.cross(w, s.t_ir[r])
+            ekf.v = ekf.R @ u
+            ekf.P[V, :] = 0.0
+            ekf.P[:, V] = 0.0
+            ekf.P[V, V] = ekf.R @ (ekf.R_ir[r] @ C @ ekf.R_ir[r].T) @ ekf.R.T \
+                + np.eye(3) * cfg.velocity_noise_floor**2
+            self.rejected_run = 0
+            st["resets"] += 1
+        self.last_zaru = tau
+
+    def _record(self, i: int, tau: float, k: int, used: np.ndarray | None) -> None:
+        """Output pose ``i`` (the first radar's frame ``k``) from the filter's state."""
+        s, ekf = self.s, self.s.ekf
+        self.last_out = tau
+        self.out_t[i] = tau
+        self.out_R[i], self.out_p[i], self.out_v[i] = ekf.R, ekf.p, ekf.v
+        rb = ekf.R @ s.imu_T_base.translation
+        J = np.zeros((6, ekf.dim))
+        J[:3, P] = np.eye(3)
+        J[:3, TH] = -skew(rb)
+        J[3:, TH] = np.eye(3)
+        self.out_cov[i] = J @ ekf.P @ J.T
+        dg = np.diag(ekf.P)
+        self.out_b[i] = [ekf.ba, np.sqrt(dg[BA]), ekf.bg, np.sqrt(dg[BG])]
+        self.out_td[i, 0] = ekf.td
+        self.out_td[i, 1] = [np.sqrt(dg[ekf.td_index(j)]) for j in range(len(s.tracks))]
+        self.out_vcov[i] = ekf.P[V, V]
+        if used is not None and s.pts is not None:
+            mask = np.zeros(s.pts[0][k][2], dtype=bool)
+            mask[s.pts[0][k][1][used]] = True
+            self.out_masks[i] = mask
+
+
+def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndarray
+                    ) -> np.ndarray:
+    """The attitudes ``world_R_imu`` of the poses with the first ``anchor_delay`` seconds'
+    replaced by the attitude at ``anchor_delay`` carried back by the bias-corrected gyro.
+
+    The first attitude estimates are the least certain (gravity aligned, possibly while
+    moving); the filter's attitude a few seconds later, carried back, is better (a fixed-lag
+    smoothing of the start). Without it a start-up tilt error of the first pose tilts the
+    whole trajectory once the first poses are put on the truth's."""
+    c = int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay))
+    c = min(c, len(out_t) - 1)
+    if c == 0:
+        return out_R
+    sel = (s.imu_t > out_t[0]) & (s.imu_t < out_t[c])
+    tg, inv = np.unique(np.concatenate([out_t[:c + 1], s.imu_t[sel]]), return_inverse=True)
+    _, wg = s.ekf.imu_at(tg)
+    cum = integrate_gyro(tg, wg, bias=bg[c])            # imu(t_0)_R_imu(t)
+    pos = inv[:c + 1]
+    back = cum[pos].inv() * cum[pos[-1]]                # imu(t_i)_R_imu(t_c)
+    out = out_R.copy()
+    out[:c] = (Rotation.from_matrix(out_R[c]) * back[:c].inv()).as_matrix()
+    return out
+
+
+def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
+            groundtruth: Trajectory | None) -> RioResult:
+    """The loop's poses re-anchored at the initial pose, as a :class:`RioResult`."""
+    done = np.isfinite(lp.out_t)
+    prim = s.tracks[0]
+    if not done.all():
+        warnings.warn(f"{prim.frame}: {int((~done).sum())} radar frames after the IMU's end; "
+                      "left out", DataWarning, stacklevel=3)
+    out_t, out_R, out_p, out_v = (a[done] for a in (lp.out_t, lp.out_R, lp.out_p, lp.out_v))
+    out_cov, out_b, out_td = lp.out_cov[done], lp.out_b[done], lp.out_td[done]
+    masks = [mk for mk, d in zip(lp.out_masks, done, strict=True) if d] \
+        if s.pts is not None else None
+    out_R = _smoothed_start(s, out_t, out_R, out_b[:, 2])
+    # world_T_base in the filter's frame, then re-anchored at the initial pose.
+    rot_imu = Rotation.from_matrix(out_R)
+    rot_base = rot_imu * s.imu_T_base.rotation
+    pos_base = out_p + rot_imu.apply(np.tile(s.imu_T_base.translation, (len(out_p), 1)))
+    if initial_pose is None:
+        initial_pose = (groundtruth.at(out_t[0]) if groundtruth is not None
+                        and groundtruth.covers(out_t[:1])[0] else SE3.identity())
+    a_rot = initial_pose.rotation * rot_base[0].inv()
+    a_t = initial_pose.translation - a_rot.apply(pos_base[0])
+    traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
+                      f"{s.names[0]} radar-inertial EKF")
+    am = a_rot.as_matrix()
+    big = np.zeros((6, 6))
+    big[:3, :3] = big[3:, 3:] = am
+    phi = np.array([Rotation.from_matrix(e.rotation.as_matrix().T @ s.ekf.R_ir[r]).as_rotvec()
+                    for r, e in enumerate(s.ext)])
+    return RioResult(traj, prim.timestamps[lp.k0:][done].copy(), big @ out_cov @ big.T,
+                     a_rot.apply(out_v), out_b[:, 0], out_b[:, 1], out_b[:, 2], out_b[:, 3],
+                     out_td[:, 0], out_td[:, 1], phi, s.names, s.static[0][lp.k0:][done],
+                     lp.stats, am @ lp.out_vcov[done] @ am.T, masks)
+
+
 def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
                  imu_timestamps: np.ndarray, imu_data: np.ndarray, *,
                  radars: Sequence[str] | None = None, config: RioConfig | None = None,
                  initial_pose: SE3 | None = None,
                  groundtruth: Trajectory | None = None,
-                 still: Sequence[np.ndarray] | None = None) -> RioResult:
+                 still: Sequence[np.ndarray] | None = None,
+                 points: Sequence[Sequence[np.ndarray]] | None = None) -> RioResult:
     """Radar-inertial odometry of a run with the error-state EKF.
 
     Parameters
@@ -296,274 +757,22 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
         Per track, bool ``(M_r,)``: whether each frame's cloud shows a still world
         (:func:`~coloradar.odometry.zero_velocity.still_world`); None: judged from the
         ego-velocities only.
+    points
+        Per track, per frame the radar's point cloud, float ``(N_k, 5)`` ``x y z intensity
+        range_rate`` (radar frame): with ``config.update == "doppler"`` (the default) every
+        point is a measurement of the filter (:mod:`.doppler`). None: the frames'
+        ego-velocities only (loosely coupled).
 
     Returns
     -------
     RioResult
     """
     cfg = config or RioConfig()
-    tr_list = [tracks] if isinstance(tracks, EgoVelocityTrack) else list(tracks)
-    if not tr_list:
-        raise SettingsError("rio_odometry needs at least one ego-velocity track")
-    names = tuple(radars) if radars is not None else tuple(t.frame for t in tr_list)
-    if len(names) != len(tr_list):
-        raise SettingsError(f"{len(tr_list)} tracks but {len(names)} radar names")
-    imu_t = np.asarray(imu_timestamps, dtype=np.float64).reshape(-1)
-    imu = np.asarray(imu_data, dtype=np.float64)
-    if imu.shape != (imu_t.size, 6):
-        raise SettingsError(f"expected IMU data of shape ({imu_t.size}, 6), got {imu.shape}")
-    good_imu = np.all(np.isfinite(imu), axis=1) & np.isfinite(imu_t)
-    imu_t, imu = imu_t[good_imu], imu[good_imu]
-    if imu_t.size < 10 or np.any(np.diff(imu_t) <= 0):
-        raise ColoradarError("radar-inertial odometry needs an IMU stream of at least 10 "
-                             "samples with strictly increasing timestamps")
-    n_r = len(tr_list)
-    ekf = ErrorStateEKF(imu_t, imu[:, :3], imu[:, 3:], cfg.noise, n_r)
-    base_T_imu = sensor_to_base(calib, "imu")
-    imu_T_base = base_T_imu.inverse()
-    ext = [base_T_imu.inverse() @ sensor_to_base(calib, n) for n in names]
-    t_ir = [e.translation for e in ext]
-    for r, e in enumerate(ext):
-        ekf.R_ir[r] = e.rotation.as_matrix()
-        ekf.td[r] = cfg.time_offset
-    planar = [_planar(t) for t in tr_list]
-    zv = cfg.zero_velocity
-    static = []
-    for r, tr in enumerate(tr_list):
-        quiet = imu_quiet(imu_t, imu[:, :3], imu[:, 3:], tr.timestamps + cfg.time_offset, zv)
-        static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv,
-                                    None if still is None else still[r]))
-
-    # -- initialisation at the first usable frame of the first radar ------------------------
-    prim = tr_list[0]
-    inside = (prim.timestamps + cfg.time_offset >= imu_t[0]) & \
-             (prim.timestamps + cfg.time_offset <= imu_t[-1])
-    measured = prim.ok & np.all(np.isfinite(prim.velocity), axis=1)
-    usable = np.flatnonzero(inside & (measured | static[0]))
-    if usable.size == 0:
-        raise ColoradarError(f"{prim.frame}: no radar frame with a usable ego-velocity lies "
-                             "within the IMU's time span; nothing to filter")
-    gate_sigma = float(np.sqrt(chi2.ppf(cfg.gate_probability, 3))) \
-        if cfg.gate_probability < 1 else np.inf
-    meas = np.flatnonzero(inside & measured)
-
-    def corroborated(k: int) -> bool:
-        # A moving start takes the frame's velocity as the filter's: the next measured frame
-        # must agree with it as far as the IMU allows (see _consistent).
-        nxt = meas[meas > k]
-        return static[0][k] or nxt.size == 0 or _consistent(
-            prim, k, int(nxt[0]), ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset,
-            cfg.velocity_noise_floor, gate_sigma, cfg.velocity_noise_scale)
-
-    k0 = next((int(k) for k in usable if corroborated(int(k))), int(usable[0]))
-    if k0 > 0 or not inside.all():
-        dropped = int(k0 + (~inside[k0:]).sum())
-        warnings.warn(f"{prim.frame}: {dropped} of {len(prim)} radar frames lie before the "
-                      "first usable one or outside the IMU's time span; left out",
-                      DataWarning, stacklevel=2)
-    t0 = float(prim.timestamps[k0] + cfg.time_offset)
-    half = cfg.align_window / 2
-    win = (imu_t >= t0 - half) & (imu_t <= t0 + half)
-    if win.sum() < 5:
-        win = np.argsort(np.abs(imu_t - t0))[:10]
-    f_win, w_win = imu[win, :3], imu[win, 3:]
-    is_static0 = bool(static[0][k0])
-    ekf.t = t0
-    P0 = np.zeros(ekf.dim)
-    if is_static0:
-        ekf.R = gravity_alignment(f_win)
-        ekf.bg = w_win.mean(axis=0)
-        ekf.v = np.zeros(3)
-        tilt = cfg.accel_bias_std / _G0
-        P0[V] = cfg.zupt_std**2
-        # The mean of white rate noise over the window, plus a floor for residual motion.
-        span = max(float(np.ptp(imu_t[win])), 1e-3)
-        P0[BG] = cfg.gyro_noise_density**2 / span + (2e-4) ** 2
-    else:
-        tt = prim.timestamps + cfg.time_offset
-        sel = np.flatnonzero(measured & inside & (tt >= t0) & (tt <= t0 + cfg.align_window))
-        sel = np.array([j for j in sel if j == k0 or _consistent(
-            prim, k0, int(j), ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset,
-            cfg.velocity_noise_floor, gate_sigma, cfg.velocity_noise_scale)], dtype=np.int64)
-        u0, a_b = _initial_motion(prim, sel, ekf, t_ir[0], ekf.R_ir[0], cfg.time_offset)
-        ekf.R = gravity_alignment(f_win, a_b)
-        ekf.v = ekf.R @ u0
-        tilt = cfg.moving_tilt_std
-        vstd = np.sqrt(cfg.velocity_noise_scale**2 * np.max(np.diag(prim.covariance[k0]))
-                       + cfg.velocity_noise_floor**2)
-        P0[V] = vstd**2
-        P0[BG] = cfg.gyro_bias_std**2
-    P0[P] = 1e-12
-    P0[TH] = [tilt**2, tilt**2, (1e-3) ** 2]
-    P0[BA] = cfg.accel_bias_std**2
-    for r in range(n_r):
-        if cfg.estimate_extrinsic_rotation:
-            # A planar ego-velocity (v_x, v_y only) sees the radar's yaw, not its roll and
-            # pitch: those would only wander, so they stay at the calibration's.
-            sl = ekf.phi_slice(r)
-            P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if planar[r] \
-                else cfg.extrinsic_rotation_std**2
-    ekf.P = np.diag(P0)
-
-    # -- the event loop ----------------------------------------------------------------------
-    # Frames of the other radars from before the start are old news: left out.
-    queues = [np.array([k for k in range(len(tr))
-                        if (k >= k0 if r == 0 else tr.timestamps[k] + cfg.time_offset >= t0)],
-                       dtype=np.int64) for r, tr in enumerate(tr_list)]
-
-    def events() -> Iterator[tuple[float, int, int]]:
-        # Frames in the order of their IMU times `stamp + t_d[r]` under the current offsets:
-        # the radars' offsets differ, so stamp order is not time order, and a frame taken
-        # after the filter has passed its time would be evaluated late.
-        pos = [0] * n_r
-        while True:
-            cand = [(float(tr_list[r].timestamps[queues[r][pos[r]]] + ekf.td[r]), r)
-                    for r in range(n_r) if pos[r] < queues[r].size]
-            if not cand:
-                return
-            r = min(cand)[1]
-            k = int(queues[r][pos[r]])
-            pos[r] += 1
-            yield float(tr_list[r].timestamps[k]), r, k
-
-    m = len(prim) - k0
-    out_t = np.full(m, np.nan)
-    out_stamp = prim.timestamps[k0:].copy()
-    out_R = np.zeros((m, 3, 3))
-    out_p = np.zeros((m, 3))
-    out_v = np.zeros((m, 3))
-    out_cov = np.zeros((m, 6, 6))
-    out_b = np.zeros((m, 4, 3))
-    out_td = np.zeros((m, 2, n_r))
-    stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0}
-             for n in names}
-    gate3 = float(chi2.ppf(cfg.gate_probability, 3)) if cfg.gate_probability < 1 else None
-    gates = {3: gate3}
-    last_zaru = t0
-    sig_w2 = cfg.gyro_noise_density**2
-    last_out = -np.inf
-    rejected_run = 0                              # radar frames rejected since any acceptance
-    td_on = np.zeros(n_r, dtype=bool)
-    for stamp, r, k in events():
-        tr = tr_list[r]
-        want = stamp + ekf.td[r]
-        tau = max(want, ekf.t)
-        if r == 0 and tau <= last_out:
-            tau = last_out + 1e-6                 # poses strictly in time order
-        if tau > imu_t[-1]:
-            break
-        ekf.propagate(tau)
-        st = stats[names[r]]
-        if cfg.estimate_time_offset and not td_on[r] and tau - t0 >= cfg.time_offset_warmup:
-            # The time offset is estimated once the filter has settled: right after the
-            # start, errors of the initial state would be read as a time offset.
-            j = ekf.td_index(r)
-            ekf.P[j, :] = ekf.P[:, j] = 0.0
-            ekf.P[j, j] = cfg.time_offset_std**2
-            td_on[r] = True
-        if static[r][k]:
-            H = np.zeros((3, ekf.dim))
-            H[:, V] = np.eye(3)
-            acc, _ = ekf.update(-ekf.v, H, np.eye(3) * cfg.zupt_std**2, gates[3])
-            rejected_run = 0 if acc else rejected_run
-            sel = (imu_t > last_zaru) & (imu_t <= tau)
-            if sel.sum() >= 3:
-                Hg = np.zeros((3, ekf.dim))
-                Hg[:, BG] = np.eye(3)
-                span = max(tau - last_zaru, 1e-3)
-                z = imu[sel, 3:].mean(axis=0)
-                # The mean of white rate noise over `span` seconds, plus a floor for the
-                # rig's residual motion.
-                Rg = np.eye(3) * (sig_w2 / span + (2e-4) ** 2)
-                ekf.update(z - ekf.bg, Hg, Rg, gates[3])
-            last_zaru = tau
-            st["zupts" if acc else "rejected"] += 1
-        elif tr.ok[k] and np.all(np.isfinite(tr.velocity[k])):
-            y, H = ekf.radar_velocity_model(r, t_ir[r])
-            if want < tau:
-                # The frame's time has passed (its offset was corrected since it was queued):
-                # the prediction at `want`, to first order (the offset column is dy/dt).
-                y = y + (want - tau) * H[:, ekf.td_index(r)]
-            C = _radar_noise(tr.covariance[k], cfg.velocity_noise_scale,
-                             cfg.velocity_noise_floor)
-            if planar[r]:
-                # v_z is not measured: the planar model's assumption v_z = 0, loosely.
-                C[2, :] = C[:, 2] = 0.0
-                C[2, 2] = cfg.planar_vz_std**2
-            acc, _ = ekf.update(tr.velocity[k] - y, H, C, gates[3])
-            st["updates" if acc else "rejected"] += 1
-            rejected_run = 0 if acc else rejected_run + 1
-            if rejected_run >= cfg.max_rejected * n_r:
-                # The filter has lost the radars (every frame of every radar for a while is
-                # an outlier): restart the velocity from this one, with its uncertainty.
-                w, _ = ekf.angular_state(tau)
-                u = ekf.R_ir[r] @ tr.velocity[k] - np.cross(w, t_ir[r])
-                ekf.v = ekf.R @ u
-                ekf.P[V, :] = 0.0
-                ekf.P[:, V] = 0.0
-                ekf.P[V, V] = ekf.R @ (ekf.R_ir[r] @ C @ ekf.R_ir[r].T) @ ekf.R.T \
-                    + np.eye(3) * cfg.velocity_noise_floor**2
-                rejected_run = 0
-                st["resets"] += 1
-            last_zaru = tau
-        else:
-            st["failed"] += 1
-        if r == 0:
-            i = k - k0
-            last_out = tau
-            out_t[i] = tau
-            out_R[i], out_p[i], out_v[i] = ekf.R, ekf.p, ekf.v
-            rb = ekf.R @ imu_T_base.translation
-            J = np.zeros((6, ekf.dim))
-            J[:3, P] = np.eye(3)
-            J[:3, TH] = -skew(rb)
-            J[3:, TH] = np.eye(3)
-            out_cov[i] = J @ ekf.P @ J.T
-            dg = np.diag(ekf.P)
-            out_b[i] = [ekf.ba, np.sqrt(dg[BA]), ekf.bg, np.sqrt(dg[BG])]
-            out_td[i, 0] = ekf.td
-            out_td[i, 1] = [np.sqrt(dg[ekf.td_index(j)]) for j in range(n_r)]
-    done = np.isfinite(out_t)
-    if not done.all():
-        warnings.warn(f"{prim.frame}: {int((~done).sum())} radar frames after the IMU's end; "
-                      "left out", DataWarning, stacklevel=2)
-    out_t, out_stamp, out_R, out_p, out_v = (a[done] for a in (out_t, out_stamp, out_R, out_p,
-                                                                out_v))
-    out_cov, out_b, out_td, st0 = out_cov[done], out_b[done], out_td[done], static[0][k0:][done]
-    # world_T_base in the filter's frame, then re-anchored at the initial pose.
-    rot_imu = Rotation.from_matrix(out_R)
-    rot_base = rot_imu * imu_T_base.rotation
-    pos_base = out_p + rot_imu.apply(np.tile(imu_T_base.translation, (len(out_p), 1)))
-    if initial_pose is None:
-        initial_pose = (groundtruth.at(out_t[0]) if groundtruth is not None
-                        and groundtruth.covers(out_t[:1])[0] else SE3.identity())
-    # The first attitude estimate is the least certain (gravity alignment, possibly while
-    # moving); the anchor uses the attitude `anchor_delay` seconds later carried back by the
-    # bias-corrected gyro, so that a start-up tilt error does not tilt the whole trajectory.
-    c = int(np.searchsorted(out_t, out_t[0] + cfg.anchor_delay))
-    c = min(c, len(out_t) - 1)
-    if c > 0:
-        sel = (imu_t > out_t[0]) & (imu_t < out_t[c])
-        tg = np.concatenate([[out_t[0]], imu_t[sel], [out_t[c]]])
-        _, wg = ekf.imu_at(tg)
-        back = integrate_gyro(tg, wg, bias=out_b[c, 2])[-1]     # imu(t0)_R_imu(tc)
-        rot0 = Rotation.from_matrix(out_R[c]) * back.inv() * imu_T_base.rotation
-    else:
-        rot0 = rot_base[0]
-    a_rot = initial_pose.rotation * rot0.inv()
-    a_t = initial_pose.translation - a_rot.apply(pos_base[0])
-    traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
-                      f"{names[0]} radar-inertial EKF")
-    am = a_rot.as_matrix()
-    big = np.zeros((6, 6))
-    big[:3, :3] = big[3:, 3:] = am
-    cov = big @ out_cov @ big.T
-    phi = np.zeros((n_r, 3))
-    for r in range(n_r):
-        phi[r] = Rotation.from_matrix(ext[r].rotation.as_matrix().T @ ekf.R_ir[r]).as_rotvec()
-    return RioResult(traj, out_stamp, cov, a_rot.apply(out_v), out_b[:, 0], out_b[:, 1],
-                     out_b[:, 2], out_b[:, 3], out_td[:, 0], out_td[:, 1], phi, names, st0,
-                     stats)
+    s = _setup(tracks, calib, (imu_timestamps, imu_data), radars, cfg, still, points)
+    k0, t0, P0 = _initialise(s)
+    loop = _Loop(s, k0, t0, P0)
+    loop.run()
+    return _result(s, loop, initial_pose, groundtruth)
 
 
 def _floats(a: np.ndarray, digits: int = 9) -> list:

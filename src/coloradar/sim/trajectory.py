@@ -158,9 +158,19 @@ MOTION_PROFILES: dict[str, dict] = {
         "pitch": (np.radians(12.0), (0.3, 1.2)),
         "roll": (np.radians(15.0), (0.3, 1.2)),
     },
+    "vehicle": {
+        "speed_factor": 1.5,
+        # A cart or car: slopes and suspension, little sway; pitch and heave at road rates.
+        "offset": ((0.01, 0.01, 0.3), (0.02, 0.1)),
+        "yaw": (np.radians(1.0), (0.05, 0.3)),
+        "pitch": (np.radians(3.0), (0.05, 0.5)),
+        "roll": (np.radians(1.5), (0.1, 0.6)),
+    },
 }
 """Named motion profiles: ``smooth`` (default; a carefully carried rig), ``handheld`` (walking
-gait: bob, sway and tilt at the step rate) and ``aggressive`` (fast, large rotations)."""
+gait: bob, sway and tilt at the step rate), ``aggressive`` (fast, large rotations) and
+``vehicle`` (1.5× the path's speed, slow pitch of a few degrees and tens of centimetres of
+heave, as slopes and suspension give a cart or car)."""
 
 
 def _random_sinusoids(rng: np.random.Generator, amplitude: float, band: tuple[float, float],
