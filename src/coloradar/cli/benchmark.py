@@ -9,7 +9,7 @@ import sys
 
 from ..errors import ColoradarError
 from ..odometry.metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
-from ._common import add_executor_args, executor_from_args
+from ._common import add_executor_args, check_output_outside_dataset, executor_from_args
 
 
 def _named(text: str) -> tuple[str | None, str]:
@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         tum_method,
     )
 
+    check_output_outside_dataset(args.out, (args.dataset, args.calib))
     executor = executor_from_args(args)
     methods: list[Method] = []
     estimators = args.estimator or (["default"] if not (args.estimate or args.method) else [])
