@@ -1,0 +1,205 @@
+"""Simulated runs at the point-cloud level, in memory: radar detections, IMU and truth.
+
+:func:`simulate_run` writes a complete run (ADC frames and all), which costs seconds per second
+of run on a loaded machine. SLAM and odometry experiments over many seeds need only what the
+estimators read: each radar frame's detections (the on-board detector model
+:func:`.radar.onboard_pointcloud`, for either radar), the IMU samples, the ground truth, and a
+reference lidar map. :func:`simulate_point_run` makes those from the same scene, trajectory and
+sensor models as :func:`simulate_run` (same generators keyed by seed, stream and frame), without
+synthesising ADC samples, and :func:`laps_duration` gives the run length that closes ``N`` laps
+of a scene's closed path (so that the rig comes back to where it started).
+
+The cascade has no on-board detector; its point-level frames here apply the single chip's
+detector model to the cascade's waveform and array (16 chirp loops: a coarse Doppler bin of
+0.22 m/s), which is coarser in range rate than the cascade's ADC processed by
+``coloradar.dsp``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..calib import Calibration
+from ..errors import SettingsError
+from ..geometry import Trajectory
+from ..geometry.mapping import voxel_downsample
+from .imu import GX5_25, simulate_imu
+from .lidar import LidarModel, simulate_scan
+from .paths import EllipsePath
+from .radar import RADAR_MODELS, onboard_pointcloud, visible_targets
+from .rest import RestStart
+from .run import DEFAULT_START_TIME, RATES, resolve_scene, simulated_calibration
+from .scene import Scene
+from .trajectory import RigTrajectory, make_trajectory
+
+__all__ = ["PointRun", "laps_duration", "simulate_point_run"]
+
+# The stream keys of :mod:`.run` (a run's random draws depend on (seed, stream, frame) only).
+_KEYS = {"cascade": 1, "single_chip": 2, "lidar": 3, "imu": 4, "trajectory": 8}
+
+
+@dataclass(frozen=True, eq=False)
+class PointRun:
+    """One simulated run at the point-cloud level.
+
+    Attributes
+    ----------
+    radar
+        ``"single_chip"`` or ``"cascade"``.
+    timestamps
+        float64 ``(M,)``: radar frame stamps [s, Unix-like, ``start_time`` + run time].
+    clouds
+        M float32 ``(N_i, 5)`` arrays: ``x y z intensity range_rate``, radar frame.
+    imu_timestamps, imu_data
+        float64 ``(K,)`` [s] and ``(K, 6)``: ``ax ay az`` [m/s²] ``gx gy gz`` [rad/s], IMU frame.
+    groundtruth
+        ``world_T_base`` at 10 Hz (world = the scene frame).
+    calib
+        The simulated rig's calibration.
+    reference_map
+        float32 ``(L, 3)``: the lidar's points in the world frame from true poses, voxel
+        filtered (the reference a radar map is scored against), or ``(0, 3)``.
+    trajectory
+        The rig's analytic trajectory (run time).
+    scene
+        The scene.
+    """
+
+    radar: str
+    timestamps: np.ndarray
+    clouds: list[np.ndarray]
+    imu_timestamps: np.ndarray
+    imu_data: np.ndarray
+    groundtruth: Trajectory
+    calib: Calibration
+    reference_map: np.ndarray
+    trajectory: RigTrajectory
+    scene: Scene
+
+
+def laps_duration(scene: str | os.PathLike[str] | Scene, laps: float, *, speed: float | None = None,
+                  rest: float = 0.0) -> float:
+    """Seconds the rig needs to go ``laps`` times round a scene's closed (elliptic) path.
+
+    The path parameter is ``θ(t) = θ0 + ω·s(t)`` with ``ω = speed / a`` and the start-up warp
+    ``s(t) = t − τ(1 − e^{−t/τ})`` (:class:`~coloradar.sim.paths.EllipsePath`); a lap is
+    ``Δθ = 2π``, so ``s(T) = 2π·laps/ω`` is solved for ``T`` (Newton, ``s`` is monotonic).
+    Motion-profile perturbations move the rig by centimetres about the path and do not change
+    ``θ``. ``speed`` replaces the path's speed as in :func:`simulate_run`; ``rest`` seconds of
+    standing still at the start are added.
+    """
+    sc = resolve_scene(scene)
+    path = sc.rig_path
+    if not isinstance(path, EllipsePath):
+        raise SettingsError(f"scene {sc.name!r}: laps need a closed (ellipse) rig path, it has "
+                            f"a {type(path).__name__}")
+    if not (np.isfinite(laps) and laps > 0):
+        raise SettingsError(f"laps must be a positive number, got {laps}")
+    v = path.speed if speed is None else float(speed)
+    if not v > 0:
+        raise SettingsError(f"scene {sc.name!r}: the rig path has no speed")
+    target = 2.0 * np.pi * laps * path.radii[0] / v
+    tau = path.ramp
+    t = target + tau
+    for _ in range(50):
+        if tau <= 0:
+            break
+        e = np.exp(-t / tau)
+        t -= (t - tau * (1 - e) - target) / (1 - e)
+    return float(t + rest)
+
+
+def _radar_clouds(scene: Scene, traj: RigTrajectory, calib: Calibration, radar: str,
+                  times: np.ndarray, seed: int) -> list[np.ndarray]:
+    """On-board detections of ``radar`` at run times ``times`` (radar frame, float32 (N, 5))."""
+    rc = calib.radar(radar)
+    model = RADAR_MODELS[radar]
+    b_T_s = calib.transforms[radar].matrix()
+    r_bs = Rotation.from_matrix(b_T_s[:3, :3])
+    t_bs = b_T_s[:3, 3]
+    st = traj.state(times)
+    out = []
+    for i, t in enumerate(times):
+        r_wb, w_b = st.rotation[i], st.angular_velocity[i]
+        origin = st.position[i] + r_wb.apply(t_bs)
+        vel = st.velocity[i] + r_wb.apply(np.cross(w_b, t_bs))
+        scat = scene.static_scatterers
+        objs = scene.object_scatterers(float(t))
+        if len(objs):
+            from .run import _concat  # the run's own merge of static and moving scatterers
+            scat = _concat(scat, objs)
+        targets = visible_targets(rc, model, scat, r_wb * r_bs, origin, vel,
+                                  r_bs.inv().apply(w_b), scene.rect_arrays(np.array([t])))
+        rng = np.random.default_rng([seed, _KEYS[radar], i])
+        out.append(onboard_pointcloud(rc, model, targets, rng))
+    return out
+
+
+def _reference_map(scene: Scene, traj: RigTrajectory, calib: Calibration, times: np.ndarray,
+                   seed: int, voxel: float) -> np.ndarray:
+    b_T_l = calib.transforms["lidar"].matrix()
+    parts = []
+    for i, t in enumerate(times):
+        pts = simulate_scan(scene, traj, b_T_l, float(t), LidarModel(),
+                            np.random.default_rng([seed, _KEYS["lidar"], i]))
+        xyz = pts[:, :3].astype(np.float64)
+        xyz = xyz[np.linalg.norm(xyz, axis=1) > 0.5]
+        st = traj.state(np.array([t]))
+        r = st.rotation[0] * Rotation.from_matrix(b_T_l[:3, :3])
+        o = st.position[0] + st.rotation[0].apply(b_T_l[:3, 3])
+        parts.append(voxel_downsample(r.apply(xyz) + o, voxel).astype(np.float32))
+    if not parts:
+        return np.zeros((0, 3), dtype=np.float32)
+    return voxel_downsample(np.concatenate(parts), voxel).astype(np.float32)
+
+
+def simulate_point_run(scene: str | os.PathLike[str] | Scene = "corridor", duration: float = 20.0,
+                       seed: int = 0, *, radar: str = "single_chip", motion: str = "smooth",
+                       speed: float | None = None, rest: float = 2.0,
+                       lidar_every: float | None = 2.0, map_voxel: float = 0.1) -> PointRun:
+    """Simulate a run's radar detections, IMU and ground truth in memory.
+
+    Parameters
+    ----------
+    scene, duration, seed, motion, speed, rest
+        As for :func:`~coloradar.sim.simulate_run` (``rest`` [s]: the rig stands still first).
+    radar
+        The radar whose on-board detections are simulated, at its rate (:data:`RATES`).
+    lidar_every
+        Seconds between the lidar scans of the reference map (None: no map).
+    map_voxel
+        Voxel size of the reference map [m].
+
+    Returns
+    -------
+    PointRun
+    """
+    if radar not in ("single_chip", "cascade"):
+        raise SettingsError(f"radar must be 'single_chip' or 'cascade', got {radar!r}")
+    if not (np.isfinite(duration) and duration > 1.0):
+        raise SettingsError(f"duration must be more than 1 s, got {duration}")
+    sc = resolve_scene(scene)
+    traj = make_trajectory(sc.rig_path, motion, [seed, _KEYS["trajectory"]], speed=speed)
+    if rest:
+        traj = RestStart(traj, float(rest))  # type: ignore[assignment]
+    calib, _ = simulated_calibration(true_angles=False)
+    rate = RATES[radar]
+    rng = np.random.default_rng([seed, 99])
+    times = rng.uniform(0.1, 1.0) / rate + np.arange(0.0, duration - 0.2, 1.0 / rate)
+    clouds = _radar_clouds(sc, traj, calib, radar, times, seed)
+    imu_t = np.arange(0.0, duration, 1.0 / RATES["imu"])
+    imu, _, _ = simulate_imu(traj, calib.transforms["imu"].matrix(), imu_t, GX5_25,
+                             np.random.default_rng([seed, _KEYS["imu"]]))
+    gt_t = np.arange(0.0, duration, 1.0 / RATES["groundtruth"])
+    st = traj.state(gt_t)
+    t0 = DEFAULT_START_TIME
+    gt = Trajectory(t0 + gt_t, st.position, st.rotation, name="groundtruth")
+    ref = (np.zeros((0, 3), dtype=np.float32) if lidar_every is None else
+           _reference_map(sc, traj, calib, np.arange(0.05, duration - 0.2, lidar_every), seed,
+                          map_voxel))
+    return PointRun(radar, t0 + times, clouds, t0 + imu_t, imu, gt, calib, ref,
+                    traj, sc)  # type: ignore[arg-type]
