@@ -90,7 +90,8 @@ def laps_duration(scene: str | os.PathLike[str] | Scene, laps: float, *, speed: 
     ``Δθ = 2π``, so ``s(T) = 2π·laps/ω`` is solved for ``T`` (Newton, ``s`` is monotonic).
     Motion-profile perturbations move the rig by centimetres about the path and do not change
     ``θ``. ``speed`` replaces the path's speed as in :func:`simulate_run`; ``rest`` seconds of
-    standing still at the start are added.
+    standing still at the start are added, and half the rest's 1 s ease-in ramp
+    (:class:`~coloradar.sim.rest.RestStart`, whose warp lags the motion by that much).
     """
     sc = resolve_scene(scene)
     path = sc.rig_path
@@ -110,7 +111,7 @@ def laps_duration(scene: str | os.PathLike[str] | Scene, laps: float, *, speed: 
             break
         e = np.exp(-t / tau)
         t -= (t - tau * (1 - e) - target) / (1 - e)
-    return float(t + rest)
+    return float(t + (rest + 0.5 if rest > 0 else 0.0))
 
 
 def _radar_clouds(scene: Scene, traj: RigTrajectory, calib: Calibration, radar: str,
@@ -201,5 +202,4 @@ def simulate_point_run(scene: str | os.PathLike[str] | Scene = "corridor", durat
     ref = (np.zeros((0, 3), dtype=np.float32) if lidar_every is None else
            _reference_map(sc, traj, calib, np.arange(0.05, duration - 0.2, lidar_every), seed,
                           map_voxel))
-    return PointRun(radar, t0 + times, clouds, t0 + imu_t, imu, gt, calib, ref,
-                    traj, sc)  # type: ignore[arg-type]
+    return PointRun(radar, t0 + times, clouds, t0 + imu_t, imu, gt, calib, ref, traj, sc)

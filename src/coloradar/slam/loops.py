@@ -136,8 +136,9 @@ def verify_loop(c: Candidate, submaps: list[Submap], odometry: SE3, odometry_cov
     """Register candidate ``c`` from the odometry's ``i_T_j`` and test it (module docstring);
     ``odometry_cov`` is the ``(6, 6)`` covariance of that relative pose."""
     reg = register(submaps[c.i], submaps[c.j], odometry, settings)
-    base: dict[str, Any] = dict(i=c.i, j=c.j, descriptor_distance=c.descriptor_distance, gate_sigma=c.gate_sigma,
-                fitness=reg.fitness, overlap=reg.overlap, rmse=reg.rmse)
+    base: dict[str, Any] = dict(i=c.i, j=c.j, descriptor_distance=c.descriptor_distance,
+                                gate_sigma=c.gate_sigma, fitness=reg.fitness,
+                                overlap=reg.overlap, rmse=reg.rmse)
     floor = np.diag([np.radians(settings.loop_rotation_std_deg) ** 2] * 3
                     + [settings.loop_translation_std ** 2] * 3)
     cov = (reg.covariance if np.all(np.isfinite(reg.covariance)) else np.full((6, 6), np.nan))

@@ -90,7 +90,7 @@ class SlamSettings:
 
     keyframe_distance: float = 1.0
     keyframe_angle_deg: float = 15.0
-    submap_window: float = 1.5
+    submap_window: float = 3.0
     submap_voxel: float = 0.1
     max_range: float = 12.0
     min_range: float = 0.4
@@ -118,7 +118,7 @@ class SlamSettings:
     robust_kernel: str = "cauchy"
     odometry_floor_translation: float = 0.005
     odometry_floor_rotation_deg: float = 0.1
-    max_loop_candidates: int = 3
+    max_loop_candidates: int = 2
     map_voxel: float = 0.15
     map_min_keyframes: int = 3
 
