@@ -30,8 +30,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--source", choices=POINT_SOURCES,
                    help="point clouds from the sensor's own point clouds, ADC frames or "
                         "heatmaps (default: pointclouds when present, else adc, else heatmaps)")
-    p.add_argument("--registration", choices=("GICP", "VGICP"), default="GICP",
-                   help="small_gicp registration (default GICP)")
     p.add_argument("--keyframe-distance", type=positive_float, default=1.0, metavar="M",
                    help="a keyframe every M metres (default 1)")
     p.add_argument("--keyframe-angle", type=positive_float, default=15.0, metavar="DEG",
@@ -53,8 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from ..slam import SlamSettings
     from ..slam.run import run_slam
 
-    settings = replace(SlamSettings(), registration=args.registration,
-                       keyframe_distance=args.keyframe_distance,
+    settings = replace(SlamSettings(), keyframe_distance=args.keyframe_distance,
                        keyframe_angle_deg=args.keyframe_angle,
                        refine_odometry=args.refine_odometry)
     seq = open_sequence(args.run, calib=args.calib)

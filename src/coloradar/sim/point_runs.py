@@ -19,12 +19,15 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..calib import Calibration
-from ..errors import SettingsError
+from ..calib import Calibration, write_calibration
+from ..errors import OutputExistsError, SettingsError
+from ..formats import write_imu, write_poses, write_radar_pointcloud, write_timestamps
+from ..formats.layout import COLORADAR
 from ..geometry import Trajectory
 from ..geometry.mapping import voxel_downsample
 from .imu import GX5_25, simulate_imu
@@ -36,7 +39,7 @@ from .run import DEFAULT_START_TIME, RATES, resolve_scene, simulated_calibration
 from .scene import Scene
 from .trajectory import RigTrajectory, make_trajectory
 
-__all__ = ["PointRun", "laps_duration", "simulate_point_run"]
+__all__ = ["PointRun", "laps_duration", "simulate_point_run", "write_point_run"]
 
 # The stream keys of :mod:`.run` (a run's random draws depend on (seed, stream, frame) only).
 _KEYS = {"cascade": 1, "single_chip": 2, "lidar": 3, "imu": 4, "trajectory": 8}
@@ -203,3 +206,33 @@ def simulate_point_run(scene: str | os.PathLike[str] | Scene = "corridor", durat
            _reference_map(sc, traj, calib, np.arange(0.05, duration - 0.2, lidar_every), seed,
                           map_voxel))
     return PointRun(radar, t0 + times, clouds, t0 + imu_t, imu, gt, calib, ref, traj, sc)
+
+
+def write_point_run(run: PointRun, root: str | os.PathLike[str], name: str) -> Path:
+    """Write a single-chip :class:`PointRun` as a dataset run ``root/name`` (its point clouds,
+    IMU and ground truth relative to the first pose, as the dataset gives it) with the
+    calibration in ``root/calib``; refuses an existing run folder. Returns the run folder."""
+    if run.radar != "single_chip":
+        raise SettingsError("only the single chip has a point-cloud stream in the dataset "
+                            "layout; write cascade runs with simulate_run")
+    folder = Path(root) / name
+    if folder.exists():
+        raise OutputExistsError(f"{folder}: exists; choose another name or folder")
+    lay = COLORADAR
+    pcs = lay.frame("single_chip/pointclouds")
+    for i, c in enumerate(run.clouds):
+        write_radar_pointcloud(folder / pcs.frame_path(lay.first_frame + i), c)
+    write_timestamps(folder / pcs.timestamps_path, run.timestamps)
+    imu = lay.tables["imu"]
+    write_timestamps(folder / imu.timestamps_path, run.imu_timestamps)
+    write_imu(folder / imu.path, run.imu_data)
+    gt = run.groundtruth
+    inv = gt.rotations[0].inv()
+    poses = np.hstack([inv.apply(gt.translations - gt.translations[0]),
+                       (inv * gt.rotations).as_quat()])
+    tab = lay.tables["groundtruth"]
+    write_timestamps(folder / tab.timestamps_path, gt.timestamps)
+    write_poses(folder / tab.path, poses)
+    if not (Path(root) / "calib").exists():
+        write_calibration(run.calib, Path(root) / "calib")
+    return folder

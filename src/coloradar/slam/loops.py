@@ -131,16 +131,28 @@ def _log_se3(t: SE3) -> np.ndarray:
     return np.concatenate([t.rotation.as_rotvec(), t.translation])
 
 
+PLANAR_RELEASE = (np.radians(10.0), 1.0)
+"""Standard deviations [rad], [m] added to a planar loop's tilt and height."""
+
+
 def verify_loop(c: Candidate, submaps: list[Submap], odometry: SE3, odometry_cov: np.ndarray,
-                settings: SlamSettings) -> LoopRecord:
+                settings: SlamSettings, planar: bool = False) -> LoopRecord:
     """Register candidate ``c`` from the odometry's ``i_T_j`` and test it (module docstring);
-    ``odometry_cov`` is the ``(6, 6)`` covariance of that relative pose."""
+    ``odometry_cov`` is the ``(6, 6)`` covariance of that relative pose.
+
+    ``planar``: the radar measures elevation too coarsely for registration to fix height, roll
+    and pitch (fewer than 3 elevation rows: the single chip, whose odometry is planar for the
+    same reason); the loop then constrains x, y and yaw only (its tilt and height get the
+    loose standard deviations :data:`PLANAR_RELEASE`, and the odometry test ignores them).
+    """
     reg = register(submaps[c.i], submaps[c.j], odometry, settings)
     base: dict[str, Any] = dict(i=c.i, j=c.j, descriptor_distance=c.descriptor_distance,
                                 gate_sigma=c.gate_sigma, fitness=reg.fitness,
                                 overlap=reg.overlap, rmse=reg.rmse)
     floor = np.diag([np.radians(settings.loop_rotation_std_deg) ** 2] * 3
                     + [settings.loop_translation_std ** 2] * 3)
+    if planar:   # tangent (ω, v) in the base frame: x right, y forward, z up
+        floor += np.diag([PLANAR_RELEASE[0] ** 2] * 2 + [0.0] * 3 + [PLANAR_RELEASE[1] ** 2])
     cov = (reg.covariance if np.all(np.isfinite(reg.covariance)) else np.full((6, 6), np.nan))
     if reg.fitness < settings.min_fitness:
         return LoopRecord(**base, odometry_chi2=np.nan, accepted=False,

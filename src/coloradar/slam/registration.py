@@ -1,14 +1,18 @@
-"""Registration of two submaps (small_gicp GICP / VGICP) and what it is worth.
+"""Registration of two submaps (small_gicp GICP) and what it is worth.
 
 :func:`register` aligns a source submap to a target submap from an initial guess with
 small_gicp (Koide, "small_gicp: Efficient and parallel algorithms for point cloud
 registration", JOSS 2024), whose GICP (Segal et al., RSS 2009) models each point by the
 covariance of its neighbours. Its Python binding takes no covariances of ours, so the radar's
 own per-point covariances (range and angle accuracy, :func:`.submaps.point_covariances`) enter
-the result's uncertainty: the Gauss–Newton information ``H = Σ Jᵀ (C_t + R C_s Rᵀ)⁻¹ J`` of the
-paired points at the solution, with ``J = [−R [p]ₓ, R]`` the derivative of ``T·p`` under the
-right perturbation ``T·Exp(ξ)``, ``ξ = (ω, v)`` (GTSAM's ``Pose3`` tangent order), gives the
-covariance ``scale · H⁻¹``.
+the result's uncertainty: each point's covariance is its sensor covariance plus a surface term
+(``inlier_distance²`` along the local surface of its 10 nearest neighbours, nothing across it:
+a point may slide along a wall but not through it, as in GICP's plane model), and the
+Gauss–Newton information ``H = Σ Jᵀ (C_t + R C_s Rᵀ)⁻¹ J`` of the paired points at the
+solution, with ``J = [−R [p]ₓ, R]`` the derivative of ``T·p`` under the right perturbation
+``T·Exp(ξ)``, ``ξ = (ω, v)`` (GTSAM's ``Pose3`` tangent order), gives the covariance
+``scale · H⁻¹``. Along a featureless corridor that covariance is large in the corridor's
+direction, as it should be.
 
 Fitness is the share of source points within ``inlier_distance`` of the target after
 alignment; overlap is the smaller of that share both ways.
@@ -66,6 +70,19 @@ def _skew(p: np.ndarray) -> np.ndarray:
                      np.stack([-p[:, 1], p[:, 0], z], 1)], axis=1)
 
 
+def _surface(points: np.ndarray, spread: float, k: int = 10) -> np.ndarray:
+    """float64 ``(N, 3, 3)``: ``spread²`` in the plane of each point's ``k`` nearest
+    neighbours (the normal is the direction of least spread), zero along the normal."""
+    n = points.shape[0]
+    kk = min(k, n)
+    _, idx = cKDTree(points).query(points, k=kk)
+    nb = points[idx.reshape(n, kk)]
+    d = nb - nb.mean(axis=1, keepdims=True)
+    _, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))
+    normal = vec[:, :, 0]
+    return spread**2 * (np.eye(3) - np.einsum("ni,nj->nij", normal, normal))
+
+
 def _information(tgt: np.ndarray, tgt_cov: np.ndarray, src: np.ndarray, src_cov: np.ndarray,
                  t: SE3, pairs: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     it, is_ = pairs
@@ -83,7 +100,7 @@ def register_points(target: np.ndarray, source: np.ndarray, init: SE3, settings:
                     ) -> Registration:
     """Register point sets ``source`` to ``target`` (float ``(N, 3)``, ``(M, 3)`` [m]) from
     ``init`` (the source's pose in the target's frame); per-point covariances ``(N, 3, 3)``
-    (default: isotropic ``(inlier_distance/3)²``) weight the returned covariance."""
+    (default: isotropic (1 cm)²) weight the returned covariance."""
     sg = _deps.small_gicp()
     tgt = np.ascontiguousarray(target, dtype=np.float64)
     src = np.ascontiguousarray(source, dtype=np.float64)
@@ -91,7 +108,6 @@ def register_points(target: np.ndarray, source: np.ndarray, init: SE3, settings:
     if tgt.shape[0] < 6 or src.shape[0] < 6:
         return Registration(init, 0.0, 0.0, np.nan, nan6, False, 0)
     res = sg.align(tgt, src, init.matrix(), registration_type=settings.registration,
-                   voxel_resolution=max(settings.max_correspondence, settings.submap_voxel),
                    downsampling_resolution=settings.submap_voxel,
                    max_correspondence_distance=settings.max_correspondence, max_iterations=30)
     t = SE3.from_matrix(np.asarray(res.T_target_source))
@@ -102,9 +118,9 @@ def register_points(target: np.ndarray, source: np.ndarray, init: SE3, settings:
     fitness = float(near.mean())
     overlap = min(fitness, float(np.mean(d_ts <= settings.inlier_distance)))
     rmse = float(np.sqrt(np.mean(d_st[near] ** 2))) if near.any() else np.nan
-    iso = (settings.inlier_distance / 3.0) ** 2 * np.eye(3)
-    tc = target_cov if target_cov is not None else np.broadcast_to(iso, (tgt.shape[0], 3, 3))
-    sc = source_cov if source_cov is not None else np.broadcast_to(iso, (src.shape[0], 3, 3))
+    iso = 0.01**2 * np.eye(3)
+    tc = (target_cov if target_cov is not None else iso) + _surface(tgt, settings.inlier_distance)
+    sc = (source_cov if source_cov is not None else iso) + _surface(src, settings.inlier_distance)
     cov = nan6
     if near.sum() >= 6:
         info = _information(tgt, tc, src, sc, t, (i_st[near], np.flatnonzero(near)))

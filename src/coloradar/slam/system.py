@@ -5,7 +5,8 @@
 3. Keyframes and their submaps (:mod:`.submaps`).
 4. Odometry factors between consecutive keyframes; optionally a registration factor beside each
    (``refine_odometry``), kept when it agrees with the odometry.
-5. Loop candidates, verified (:mod:`.loops`).
+5. Loop candidates, verified (:mod:`.loops`); for a radar with fewer than 3 elevation rows
+   (the single chip) loops constrain x, y and yaw only.
 6. The pose graph, optimised with its consistency test (:mod:`.graph`).
 7. Every frame's pose: the odometry's, corrected by the keyframes' corrections interpolated in
    time (:func:`correct_frames`); the map from the optimised keyframe poses (:func:`build_slam_map`).
@@ -23,6 +24,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from ..calib import Calibration
 from ..geometry import SE3, Trajectory, sensor_to_base
 from ..odometry.ego_velocity import EgoVelocityConfig
+from ..odometry.pipeline import elevation_rows
 from ..odometry.rio import RioConfig
 from .frontend import FrontEnd, estimate_track, radar_inertial_frontend, relative_covariance
 from .graph import Edge, PoseGraph, optimize_with_consistency
@@ -149,8 +151,8 @@ def _odometry_edges(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: Sla
     return edges
 
 
-def _loops(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings
-           ) -> list[LoopRecord]:
+def _loops(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings,
+           planar: bool) -> list[LoopRecord]:
     traj = fe.trajectory
     pos = traj.translations[kfs]
     path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pos, axis=0), axis=1))])
@@ -167,7 +169,7 @@ def _loops(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings
             a, b = int(kfs[c.i]), int(kfs[c.j])
             rel = traj[a].inverse() @ traj[b]
             cov = relative_covariance(fe, a, b, fl_t, fl_r, steps=c.j - c.i)
-            out.append(verify_loop(c, submaps, rel, cov, s))
+            out.append(verify_loop(c, submaps, rel, cov, s, planar))
     return out
 
 
@@ -236,7 +238,7 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
         return SlamResult(traj, traj, kfs, before, before, [], np.zeros((0, 5), np.float32), fe,
                           np.zeros(0, np.int64), tm)
     edges = _odometry_edges(fe, kfs, submaps, s)
-    records = _loops(fe, kfs, submaps, s)
+    records = _loops(fe, kfs, submaps, s, elevation_rows(calib.radar(radar)) < 3)
     tm["loops"] = time.perf_counter() - t0 - sum(tm.values())
     loop_edges = [Edge(r.i, r.j, r.measured, r.covariance, "loop") for r in records
                   if r.accepted and r.measured is not None and r.covariance is not None]
