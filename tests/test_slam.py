@@ -20,11 +20,11 @@ from coloradar.geometry.cloud_metrics import score_map, voxel_iou
 pytest.importorskip("gtsam")
 pytest.importorskip("small_gicp")
 
-from coloradar.slam import SlamSettings  # noqa: E402
-from coloradar.slam.graph import Edge, PoseGraph, optimize_with_consistency  # noqa: E402
-from coloradar.slam.loops import Candidate, verify_loop  # noqa: E402
-from coloradar.slam.registration import register_points  # noqa: E402
-from coloradar.slam.submaps import Submap, descriptor_distance, scan_context  # noqa: E402
+from coloradar.slam import SlamSettings
+from coloradar.slam.graph import Edge, PoseGraph, optimize_with_consistency
+from coloradar.slam.loops import Candidate, verify_loop
+from coloradar.slam.registration import register_points
+from coloradar.slam.submaps import Submap, descriptor_distance, scan_context
 
 
 def _room_points(rng: np.random.Generator, n: int = 1500) -> np.ndarray:
@@ -191,8 +191,8 @@ def test_map_scores_against_brute_force():
     p, r = np.mean(d_pr <= 0.25), np.mean(d_rp <= 0.25)
     assert sc.precision == pytest.approx(p) and sc.recall == pytest.approx(r)
     assert sc.f_score == pytest.approx(2 * p * r / (p + r))
-    va = {tuple(int(math.floor(c / 0.5)) for c in q) for q in pred}
-    vb = {tuple(int(math.floor(c / 0.5)) for c in q) for q in ref}
+    va = {tuple(math.floor(c / 0.5) for c in q) for q in pred}
+    vb = {tuple(math.floor(c / 0.5) for c in q) for q in ref}
     assert sc.voxel_iou == pytest.approx(len(va & vb) / len(va | vb))
     assert voxel_iou(pred, pred, 0.1) == 1.0
     assert math.isnan(voxel_iou(np.zeros((0, 3)), np.zeros((0, 3)), 0.1))
