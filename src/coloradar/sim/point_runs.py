@@ -9,10 +9,13 @@ sensor models as :func:`simulate_run` (same generators keyed by seed, stream and
 synthesising ADC samples, and :func:`laps_duration` gives the run length that closes ``N`` laps
 of a scene's closed path (so that the rig comes back to where it started).
 
-The cascade has no on-board detector; its point-level frames here apply the single chip's
-detector model to the cascade's waveform and array (16 chirp loops: a coarse Doppler bin of
-0.22 m/s), which is coarser in range rate than the cascade's ADC processed by
-``coloradar.dsp``.
+The cascade has no on-board detector: its clouds come from its ADC through ``coloradar.dsp``
+(range, Doppler and angle FFTs, CFAR, Doppler unwrapping), which resolves angle as well as range
+and Doppler. Its point-level frames here use :func:`array_pointcloud`, a model of such a chain
+(not the chain itself): one detection per occupied range × Doppler × azimuth × elevation
+resolution cell above the detection threshold, at the cell's strongest scatterer with noise of
+the cell's size, unaliased range rate. The single chip keeps its on-board detector model
+(:func:`coloradar.sim.onboard_pointcloud`: one angle per range–Doppler cell).
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from .run import DEFAULT_START_TIME, RATES, resolve_scene, simulated_calibration
 from .scene import Scene
 from .trajectory import RigTrajectory, make_trajectory
 
-__all__ = ["PointRun", "laps_duration", "simulate_point_run", "write_point_run"]
+__all__ = ["PointRun", "array_pointcloud", "laps_duration", "simulate_point_run", "write_point_run"]
 
 # The stream keys of :mod:`.run` (a run's random draws depend on (seed, stream, frame) only).
 _KEYS = {"cascade": 1, "single_chip": 2, "lidar": 3, "imu": 4, "trajectory": 8}
@@ -117,6 +120,56 @@ def laps_duration(scene: str | os.PathLike[str] | Scene, laps: float, *, speed: 
     return float(t + (rest + 0.5 if rest > 0 else 0.0))
 
 
+def array_pointcloud(calib, model, targets, rng: np.random.Generator) -> np.ndarray:
+    """Detections of a radar that resolves range, Doppler, azimuth and elevation (a model of
+    ADC frames processed by ``coloradar.dsp``; see the module docstring).
+
+    A scatterer's coherent SNR is that of :func:`~coloradar.sim.onboard_pointcloud`
+    (``|A|²·Ns·Nc·Nv/(2σ²)``); scatterers sharing a cell (range bin, Doppler bin, and
+    ``2/N`` in the sine of each angle, ``N`` the distinct virtual positions along it) add up;
+    a cell whose SNR exceeds ``model.detection_threshold_db`` is one detection at its strongest
+    scatterer, with Gaussian noise of one cell's width over ``√12`` in range and range rate and
+    ``(2/N)/(1.6·√(2·SNR))`` in each sine.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 ``(N, 5)``: x y z [m], intensity (SNR [dB]), range rate [m/s], radar frame.
+    """
+    w = calib.waveform
+    if len(targets) == 0:
+        return np.zeros((0, 5), dtype=np.float32)
+    pos = targets.position
+    r = targets.range
+    nc, nv = w.num_chirps, w.num_tx * w.num_rx
+    snr_k = targets.received_amplitude**2 * w.num_samples * nc * nv / (2.0 * model.noise_std**2)
+    vpos = calib.antenna.virtual.unique_positions
+    n_az = max(2, len(np.unique(vpos[:, 0])))
+    n_el = max(2, len(np.unique(vpos[:, 1])))
+    s_az = pos[:, 1] / np.maximum(np.linalg.norm(pos[:, :2], axis=1), 1e-9)
+    s_el = pos[:, 2] / np.maximum(r, 1e-9)
+    rr = targets.range_rate
+    cells = np.stack([np.rint(r / w.range_bin_width), np.floor(rr / w.velocity_bin_width),
+                      np.floor(s_az * n_az / 2), np.floor(s_el * n_el / 2)], axis=1).astype(np.int64)
+    _, cell, = np.unique(cells, axis=0, return_inverse=True)[:2]
+    cell = cell.reshape(-1)
+    total = np.bincount(cell, weights=snr_k)
+    order = np.lexsort((-snr_k, cell))
+    first = order[np.unique(cell[order], return_index=True)[1]]          # strongest per cell
+    snr = total[cell[first]]
+    keep = (snr > 10 ** (model.detection_threshold_db / 10)) & (r[first] < w.max_range)
+    k, snr = first[keep], snr[keep]
+    sd = 1.0 / (1.6 * np.sqrt(2 * snr))
+    u_az = np.clip(s_az[k] + rng.standard_normal(k.size) * (2.0 / n_az) * sd, -0.999, 0.999)
+    u_el = np.clip(s_el[k] + rng.standard_normal(k.size) * (2.0 / n_el) * sd, -0.999, 0.999)
+    rng_m = r[k] + rng.standard_normal(k.size) * w.range_bin_width / np.sqrt(12)
+    rate = rr[k] + rng.standard_normal(k.size) * w.velocity_bin_width / np.sqrt(12)
+    el, az = np.arcsin(u_el), np.arcsin(u_az)
+    xyz = rng_m[:, None] * np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
+                                            np.sin(el)])
+    return np.column_stack([xyz, 10 * np.log10(snr), rate]).astype(np.float32)
+
+
 def _radar_clouds(scene: Scene, traj: RigTrajectory, calib: Calibration, radar: str,
                   times: np.ndarray, seed: int) -> list[np.ndarray]:
     """On-board detections of ``radar`` at run times ``times`` (radar frame, float32 (N, 5))."""
@@ -139,7 +192,8 @@ def _radar_clouds(scene: Scene, traj: RigTrajectory, calib: Calibration, radar: 
         targets = visible_targets(rc, model, scat, r_wb * r_bs, origin, vel,
                                   r_bs.inv().apply(w_b), scene.rect_arrays(np.array([t])))
         rng = np.random.default_rng([seed, _KEYS[radar], i])
-        out.append(onboard_pointcloud(rc, model, targets, rng))
+        detect = onboard_pointcloud if radar == "single_chip" else array_pointcloud
+        out.append(detect(rc, model, targets, rng))
     return out
 
 

@@ -30,10 +30,16 @@ def slam_figure(res: SlamResult, groundtruth: Trajectory | None = None, title: s
     """Top view (x–y, world frame [m]) of the map (grey, darker where more keyframes saw it),
     the odometry (dashed), the optimised trajectory, accepted loops (green) and rejected
     candidates (red), and the ground truth (black) when given."""
-    fig = Figure(figsize=(9.0, 7.0), dpi=110, layout="constrained")
+    m = res.map_points
+    xy = np.vstack([res.trajectory.translations[:, :2], m[:, :2]]) if m.shape[0] else \
+        res.trajectory.translations[:, :2]
+    span = np.ptp(xy, axis=0) + 2.0
+    # The figure takes the map's shape (a long corridor is a wide, low picture).
+    ratio = span[0] / span[1]
+    height = float(np.clip(10.0 / ratio, 3.5, 9.0)) + 1.6
+    fig = Figure(figsize=(10.0, height), dpi=110, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    m = res.map_points
     if m.shape[0]:
         ax.scatter(m[:, 0], m[:, 1], s=2, c=np.minimum(m[:, 3], 10), cmap="Greys", vmin=0,
                    vmax=12, linewidths=0, label=f"radar map ({m.shape[0]:,} voxels)")
@@ -51,11 +57,14 @@ def slam_figure(res: SlamResult, groundtruth: Trajectory | None = None, title: s
     o, t = res.odometry.translations, res.trajectory.translations
     ax.plot(o[:, 0], o[:, 1], color="tab:orange", lw=1.0, ls="--", label="odometry (before)")
     ax.plot(t[:, 0], t[:, 1], color="tab:blue", lw=1.2, label="SLAM (after)")
-    ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(title or "radar SLAM")
-    ax.legend(loc="best", fontsize=8)
+    if ratio <= 3.0:
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_ylabel("y [m]")
+    else:  # a long corridor: y stretched so that the loops can be seen
+        ax.set_ylabel("y [m] (stretched)")
+    ax.set_title(title or "radar SLAM", fontsize=10)
+    fig.legend(loc="outside lower center", ncol=3, fontsize=8)
     return fig
 
 
