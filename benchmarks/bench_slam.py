@@ -48,7 +48,7 @@ def _run(cache: Path, scene: str, minutes: float):
 
 def _slam(r):
     return slam_from_clouds(r.clouds, r.timestamps, r.calib, r.imu_timestamps, r.imu_data,
-                            radar=r.radar, ego_config=ego_velocity_config(r.calib.single_chip),
+                            radar=r.radar, frontend=ego_velocity_config(r.calib.single_chip),
                             groundtruth=r.groundtruth)
 
 

@@ -37,6 +37,7 @@ from coloradar.odometry import ego_velocity_config
 from coloradar.odometry.metrics import absolute_trajectory_error
 from coloradar.sim.point_runs import laps_duration, simulate_point_run
 from coloradar.slam import SlamSettings, slam_from_clouds
+from coloradar.slam.frontend import FrontEndSettings
 
 SCENES = ("corridor", "courtyard", "hallway")
 
@@ -78,8 +79,9 @@ def one(cache: Path, scene: str, seed: int, laps: float, radar: str, s: SlamSett
         warnings.simplefilter("ignore")
         res = slam_from_clouds(clouds, run.timestamps, run.calib, run.imu_timestamps,
                                run.imu_data, radar=radar, settings=s,
-                               ego_config=ego_velocity_config(run.calib.radar(radar)),
-                               groundtruth=run.groundtruth, seed=seed)
+                               frontend=FrontEndSettings(ego_velocity_config(run.calib.radar(radar)),
+                                                         seed=seed),
+                               groundtruth=run.groundtruth)
     sec = time.perf_counter() - t
     a0 = absolute_trajectory_error(res.odometry, run.groundtruth)
     a1 = absolute_trajectory_error(res.trajectory, run.groundtruth)

@@ -219,7 +219,7 @@ def corridor_loop():
         warnings.simplefilter("ignore")
         res = slam_from_clouds(run.clouds, run.timestamps, run.calib, run.imu_timestamps,
                                run.imu_data, radar="single_chip",
-                               ego_config=ego_velocity_config(run.calib.single_chip),
+                               frontend=ego_velocity_config(run.calib.single_chip),
                                groundtruth=run.groundtruth)
     return run, res
 
@@ -277,6 +277,13 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
         assert ev["ate"]["rmse_m"] < 0.1
         assert main(["slam", str(folder), "--out", str(out), "--no-plot"]) != 0   # no overwrite
         assert "overwrite" in capsys.readouterr().err
+        # coloradar benchmark's method: the same trajectory through the callable.
+        from coloradar.slam.run import benchmark_method
+
+        tum = benchmark_method(folder, tmp_path / "bm", {"radar": "single_chip"})
+        assert tum.read_text().splitlines()[-1] == (out / "trajectory.txt").read_text().splitlines()[-1]
+        with pytest.raises(Exception, match="unknown settings"):
+            benchmark_method(folder, tmp_path / "bm2", {"no_such_setting": 1})
 
 
 def test_without_gtsam_the_error_names_the_extra(monkeypatch):

@@ -27,8 +27,28 @@ from ..odometry.rio import RioConfig, RioResult, rio_odometry
 from ..odometry.velocity_track import EgoVelocityTrack
 from ..odometry.zero_velocity import ZeroVelocityConfig, still_world
 
-__all__ = ["FrontEnd", "estimate_track", "frontend_from_rio", "radar_inertial_frontend",
+__all__ = ["FrontEnd", "FrontEndSettings", "estimate_track", "frontend_from_rio", "radar_inertial_frontend",
            "relative_covariance"]
+
+
+@dataclass(frozen=True)
+class FrontEndSettings:
+    """The front end's settings.
+
+    Attributes
+    ----------
+    ego_velocity
+        Ego-velocity estimator settings (:func:`coloradar.odometry.ego_velocity_config` of the
+        radar).
+    filter
+        The radar-inertial filter's settings (default :class:`~coloradar.odometry.rio.RioConfig`).
+    seed
+        RANSAC seed (frame ``k`` draws with ``SeedSequence([seed, k])``).
+    """
+
+    ego_velocity: EgoVelocityConfig
+    filter: RioConfig | None = None
+    seed: int = 0
 
 
 @dataclass(frozen=True, eq=False)

@@ -37,6 +37,7 @@ from ..geometry.cloud_metrics import MapScores, score_map
 from ..odometry.ego_velocity import EgoVelocityConfig
 from ..odometry.pipeline import ego_velocity_config, run_path
 from ..odometry.tum import write_tum
+from .frontend import FrontEndSettings
 from .settings import SlamSettings
 from .system import SlamResult, slam_from_clouds
 
@@ -200,7 +201,7 @@ def run_slam(seq, out: str | os.PathLike[str], *, radar: str = "single_chip",
     cfg = ego_config or ego_velocity_config(seq.calib.radar(radar))
     res = slam_from_clouds(_clouds(stream, convert, idx), stream.timestamps[idx], seq.calib,
                            seq.imu.timestamps, seq.imu.data, radar=radar, settings=s,
-                           ego_config=cfg, groundtruth=gt, seed=seed)
+                           frontend=FrontEndSettings(cfg, seed=seed), groundtruth=gt)
     scores = None
     if score_against_lidar:
         scores = score_map(res.map_points, reference_lidar_map(seq))

@@ -26,7 +26,13 @@ from ..geometry import SE3, Trajectory, sensor_to_base
 from ..odometry.ego_velocity import EgoVelocityConfig
 from ..odometry.pipeline import elevation_rows
 from ..odometry.rio import RioConfig
-from .frontend import FrontEnd, estimate_track, radar_inertial_frontend, relative_covariance
+from .frontend import (
+    FrontEnd,
+    FrontEndSettings,
+    estimate_track,
+    radar_inertial_frontend,
+    relative_covariance,
+)
 from .graph import Edge, PoseGraph, optimize_with_consistency
 from .loops import LoopRecord, loop_candidates, verify_loop
 from .registration import register
@@ -175,9 +181,9 @@ def _loops(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings
 
 def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib: Calibration,
                      imu_timestamps: np.ndarray, imu_data: np.ndarray, *, radar: str,
-                     settings: SlamSettings | None = None, ego_config: EgoVelocityConfig,
-                     rio_config: RioConfig | None = None, groundtruth: Trajectory | None = None,
-                     seed: int = 0) -> SlamResult:
+                     frontend: FrontEndSettings | EgoVelocityConfig,
+                     settings: SlamSettings | None = None,
+                     groundtruth: Trajectory | None = None) -> SlamResult:
     """Radar SLAM of one radar's point clouds and the IMU.
 
     Parameters
@@ -193,22 +199,21 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
         float64 ``(K,)`` [s], ``(K, 6)``: ``ax ay az`` [m/s²] ``gx gy gz`` [rad/s].
     radar
         ``"single_chip"`` or ``"cascade"``.
+    frontend
+        :class:`~coloradar.slam.frontend.FrontEndSettings`, or just the ego-velocity settings
+        (:func:`coloradar.odometry.ego_velocity_config`; the filter's defaults, seed 0).
     settings
         :class:`SlamSettings` (default values when None).
-    ego_config
-        Ego-velocity settings (:func:`coloradar.odometry.ego_velocity_config`).
-    rio_config
-        Filter settings.
     groundtruth
         Only for the initial pose (as the odometry's).
-    seed
-        RANSAC seed.
 
     Returns
     -------
     SlamResult
     """
     s = settings or SlamSettings()
+    fs = frontend if isinstance(frontend, FrontEndSettings) else FrontEndSettings(frontend)
+    ego_config, rio_config = fs.ego_velocity, fs.filter or RioConfig()
     thr = s.static_threshold if s.static_threshold is not None else ego_config.threshold
     tm: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -218,9 +223,8 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
             v = est.velocity if est.ok else np.full(3, np.nan)
             store.append(static_points(cloud, v, thr, s.min_range, s.max_range))
 
-        track, still = estimate_track(clouds, timestamps, ego_config, seed=seed, frame=radar,
-                                      on_frame=keep,
-                                      zero_velocity=(rio_config or RioConfig()).zero_velocity)
+        track, still = estimate_track(clouds, timestamps, ego_config, seed=fs.seed, frame=radar,
+                                      on_frame=keep, zero_velocity=rio_config.zero_velocity)
         tm["ego_velocity"] = time.perf_counter() - t0
         fe = radar_inertial_frontend(track, still, calib, imu_timestamps, imu_data, radar=radar,
                                      groundtruth=groundtruth, config=rio_config)
