@@ -28,9 +28,12 @@ from scipy.spatial import cKDTree
 from ..geometry import SE3
 from . import _deps
 from .settings import SlamSettings
-from .submaps import Submap
+from .submaps import Submap, surface_covariances
 
-__all__ = ["Registration", "register", "register_points"]
+__all__ = ["MIN_POINTS", "Registration", "register", "register_points"]
+
+MIN_POINTS = 20
+"""Fewer points than this in either set: not registered (fitness 0)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,19 +73,6 @@ def _skew(p: np.ndarray) -> np.ndarray:
                      np.stack([-p[:, 1], p[:, 0], z], 1)], axis=1)
 
 
-def _surface(points: np.ndarray, spread: float, k: int = 10) -> np.ndarray:
-    """float64 ``(N, 3, 3)``: ``spread²`` in the plane of each point's ``k`` nearest
-    neighbours (the normal is the direction of least spread), zero along the normal."""
-    n = points.shape[0]
-    kk = min(k, n)
-    _, idx = cKDTree(points).query(points, k=kk)
-    nb = points[idx.reshape(n, kk)]
-    d = nb - nb.mean(axis=1, keepdims=True)
-    _, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))
-    normal = vec[:, :, 0]
-    return spread**2 * (np.eye(3) - np.einsum("ni,nj->nij", normal, normal))
-
-
 def _information(tgt: np.ndarray, tgt_cov: np.ndarray, src: np.ndarray, src_cov: np.ndarray,
                  t: SE3, pairs: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     it, is_ = pairs
@@ -96,16 +86,19 @@ def _information(tgt: np.ndarray, tgt_cov: np.ndarray, src: np.ndarray, src_cov:
 
 
 def register_points(target: np.ndarray, source: np.ndarray, init: SE3, settings: SlamSettings,
-                    target_cov: np.ndarray | None = None, source_cov: np.ndarray | None = None
+                    target_cov: np.ndarray | None = None, source_cov: np.ndarray | None = None,
+                    surfaces: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
                     ) -> Registration:
     """Register point sets ``source`` to ``target`` (float ``(N, 3)``, ``(M, 3)`` [m]) from
     ``init`` (the source's pose in the target's frame); per-point covariances ``(N, 3, 3)``
-    (default: isotropic (1 cm)²) weight the returned covariance."""
+    (default: isotropic (1 cm)²) weight the returned covariance, with the surface terms
+    ``surfaces`` (:func:`.submaps.surface_covariances` of target and source; computed when
+    None)."""
     sg = _deps.small_gicp()
     tgt = np.ascontiguousarray(target, dtype=np.float64)
     src = np.ascontiguousarray(source, dtype=np.float64)
     nan6 = np.full((6, 6), np.nan)
-    if tgt.shape[0] < 6 or src.shape[0] < 6:
+    if tgt.shape[0] < MIN_POINTS or src.shape[0] < MIN_POINTS:
         return Registration(init, 0.0, 0.0, np.nan, nan6, False, 0)
     res = sg.align(tgt, src, init.matrix(), registration_type=settings.registration,
                    downsampling_resolution=settings.submap_voxel,
@@ -119,8 +112,12 @@ def register_points(target: np.ndarray, source: np.ndarray, init: SE3, settings:
     overlap = min(fitness, float(np.mean(d_ts <= settings.inlier_distance)))
     rmse = float(np.sqrt(np.mean(d_st[near] ** 2))) if near.any() else np.nan
     iso = 0.01**2 * np.eye(3)
-    tc = (target_cov if target_cov is not None else iso) + _surface(tgt, settings.inlier_distance)
-    sc = (source_cov if source_cov is not None else iso) + _surface(src, settings.inlier_distance)
+    s_t = surfaces[0] if surfaces[0] is not None else surface_covariances(
+        tgt, settings.inlier_distance)
+    s_s = surfaces[1] if surfaces[1] is not None else surface_covariances(
+        src, settings.inlier_distance)
+    tc = (target_cov if target_cov is not None else iso) + s_t
+    sc = (source_cov if source_cov is not None else iso) + s_s
     cov = nan6
     if near.sum() >= 6:
         info = _information(tgt, tc, src, sc, t, (i_st[near], np.flatnonzero(near)))
@@ -133,4 +130,5 @@ def register(target: Submap, source: Submap, init: SE3, settings: SlamSettings) 
     """Register submap ``source`` to ``target`` from ``init`` (:func:`register_points` with the
     submaps' per-point covariances)."""
     return register_points(target.points, source.points, init, settings,
-                           target.covariances, source.covariances)
+                           target.covariances, source.covariances,
+                           (target.surface, source.surface))

@@ -26,6 +26,7 @@ import tempfile
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..calib import RadarCalib
 from ..geometry import SE3, Trajectory, voxel_downsample
@@ -33,7 +34,7 @@ from .settings import SlamSettings
 
 __all__ = ["FrameStore", "PointAccuracy", "Submap", "build_submap", "descriptor_distance",
            "point_accuracy", "point_covariances", "scan_context", "select_keyframes",
-           "static_points"]
+           "static_points", "surface_covariances"]
 
 
 @dataclass(frozen=True)
@@ -175,6 +176,8 @@ class Submap:
         float64 ``(N, 3, 3)`` [m²].
     descriptor
         float32 ``(rings, sectors)``: :func:`scan_context`.
+    surface
+        float64 ``(N, 3, 3)``: :func:`surface_covariances` of the points (None: not computed).
     """
 
     frame: int
@@ -182,6 +185,24 @@ class Submap:
     intensity: np.ndarray
     covariances: np.ndarray
     descriptor: np.ndarray
+    surface: np.ndarray | None = None
+
+
+def surface_covariances(points: np.ndarray, spread: float, k: int = 10) -> np.ndarray:
+    """float64 ``(N, 3, 3)``: ``spread²`` in the plane of each point's ``k`` nearest
+    neighbours (the normal is the direction of least spread), zero along the normal: a point
+    may slide along its surface, not through it (GICP's plane model)."""
+    p = np.asarray(points, dtype=np.float64)
+    n = p.shape[0]
+    if n < 3:
+        return np.zeros((n, 3, 3))
+    kk = min(k, n)
+    _, idx = cKDTree(p).query(p, k=kk)
+    nb = p[idx.reshape(n, kk)]
+    d = nb - nb.mean(axis=1, keepdims=True)
+    _, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", d, d))
+    normal = vec[:, :, 0]
+    return spread**2 * (np.eye(3) - np.einsum("ni,nj->nij", normal, normal))
 
 
 def build_submap(k: int, traj: Trajectory, store: FrameStore, base_T_radar: SE3,
@@ -192,26 +213,25 @@ def build_submap(k: int, traj: Trajectory, store: FrameStore, base_T_radar: SE3,
     t = traj.timestamps
     lo = int(np.searchsorted(t, t[k] - settings.submap_window, side="left"))
     hi = int(np.searchsorted(t, t[k] + settings.submap_window, side="right"))
-    inv_k = traj[k].inverse()
-    rows = []
-    for f in range(lo, hi):
-        pts = store.read(int(frames[f]) if frames is not None else f)
-        if pts.shape[0] == 0:
-            continue
-        cov = point_covariances(pts[:, :3], acc)
-        k_T_radar = inv_k @ traj[f] @ base_T_radar
-        r = k_T_radar.rotation.as_matrix()
-        xyz = k_T_radar.apply(pts[:, :3].astype(np.float64))
-        cov = np.einsum("ij,njk,lk->nil", r, cov, r).reshape(-1, 9)
-        rows.append(np.column_stack([xyz, pts[:, 3], cov]))
-    if not rows:
+    parts = [store.read(int(frames[f]) if frames is not None else f) for f in range(lo, hi)]
+    sizes = np.array([p.shape[0] for p in parts])
+    if sizes.sum() == 0:
         empty = np.zeros((0, 3))
         return Submap(k, empty, np.zeros(0, np.float32), np.zeros((0, 3, 3)),
                       scan_context(empty, settings))
+    pts = np.concatenate(parts).astype(np.float64)
+    # k_T_radar for every frame of the window at once, then per point (one matrix product).
+    k_T = traj[k].inverse().matrix() @ traj[lo:hi].matrices() @ base_T_radar.matrix()
+    per_point = np.repeat(k_T, sizes, axis=0)
+    r = per_point[:, :3, :3]
+    xyz = np.einsum("nij,nj->ni", r, pts[:, :3]) + per_point[:, :3, 3]
+    cov = point_covariances(pts[:, :3], acc)
+    cov = np.einsum("nij,njk,nlk->nil", r, cov, r).reshape(-1, 9)
+    rows = [np.column_stack([xyz, pts[:, 3], cov])]
     vox = voxel_downsample(np.concatenate(rows), settings.submap_voxel)
     xyz = vox[:, :3]
     return Submap(k, xyz, vox[:, 3].astype(np.float32), vox[:, 4:].reshape(-1, 3, 3),
-                  scan_context(xyz, settings))
+                  scan_context(xyz, settings), surface_covariances(xyz, settings.inlier_distance))
 
 
 def scan_context(points: np.ndarray, settings: SlamSettings) -> np.ndarray:
@@ -240,9 +260,10 @@ def descriptor_distance(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     if not np.any(a) or not np.any(b):
         return 1.0, 0.0
     # Column s of b rolled by k lands on column s + k of a: b's frame is turned by k sectors.
-    shifts = np.stack([np.roll(b, k, axis=1) for k in range(ns)])          # (ns, rings, ns)
-    dots = np.einsum("rc,krc->kc", a, shifts)
-    occupied = (np.linalg.norm(a, axis=0) > 0)[None, :] | (np.linalg.norm(shifts, axis=1) > 0)
+    roll = (np.arange(ns)[None, :] - np.arange(ns)[:, None]) % ns          # [k, c] -> c - k
+    dots = np.einsum("rc,rkc->kc", a, b[:, roll])
+    occ_b = (np.linalg.norm(b, axis=0) > 0)[roll]                           # (ns, ns)
+    occupied = (np.linalg.norm(a, axis=0) > 0)[None, :] | occ_b
     dist = np.where(occupied, 1.0 - dots, 0.0).sum(axis=1) / np.maximum(occupied.sum(axis=1), 1)
     k = int(np.argmin(dist))
     return float(dist[k]), float(k * 2 * np.pi / ns)

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
+from scipy.stats import chi2
 
 from ..calib import Calibration
 from ..geometry import SE3, Trajectory, sensor_to_base
@@ -151,7 +152,7 @@ def _odometry_edges(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: Sla
             if (reg.fitness >= s.min_fitness and np.all(np.isfinite(reg.covariance))):
                 d = np.concatenate([(rel.inverse() @ reg.target_T_source).rotation.as_rotvec(),
                                     (rel.inverse() @ reg.target_T_source).translation])
-                if float(d @ np.linalg.solve(cov + reg.covariance, d)) < 12.6:  # chi2(6, 0.95)
+                if float(d @ np.linalg.solve(cov + reg.covariance, d)) < chi2.ppf(s.gate_probability, 6):
                     edges.append(Edge(n - 1, n, reg.target_T_source, reg.covariance,
                                       "registration"))
     return edges
