@@ -277,6 +277,11 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
         assert ev["ate"]["rmse_m"] < 0.1
         assert main(["slam", str(folder), "--out", str(out), "--no-plot"]) != 0   # no overwrite
         assert "overwrite" in capsys.readouterr().err
+        # A map scored against itself: every point on the reference.
+        assert main(["map-score", str(out / "map.ply"), "--reference", str(out / "map.ply"),
+                     "--json"]) == 0
+        sc = json.loads(capsys.readouterr().out)
+        assert sc["precision"] == 1.0 and sc["chamfer"] == 0.0 and sc["voxel_iou"] == 1.0
         # coloradar benchmark's method: the same trajectory through the callable.
         from coloradar.slam.run import benchmark_method
 
