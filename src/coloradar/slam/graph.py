@@ -85,13 +85,14 @@ class PoseGraph:
                else gtsam.noiseModel.mEstimator.Huber.Create(1.345))
         return gtsam.noiseModel.Robust.Create(est, base)
 
-    def optimize(self, active: list[bool] | None = None) -> list[SE3]:
+    def optimize(self, active: list[bool] | None = None, start: list[SE3] | None = None
+                 ) -> list[SE3]:
         """Optimised ``world_T_base`` of every keyframe; ``active[k]`` (default all) says
-        whether edge ``k`` is used."""
+        whether edge ``k`` is used; ``start``: the initial values (default :attr:`initial`)."""
         gtsam = _deps.gtsam()
         graph = gtsam.NonlinearFactorGraph()
         values = gtsam.Values()
-        for k, t in enumerate(self.initial):
+        for k, t in enumerate(start or self.initial):
             values.insert(k, _pose3(gtsam, t))
         sr, st = self.prior_std
         graph.add(gtsam.PriorFactorPose3(0, _pose3(gtsam, self.initial[0]),
@@ -132,8 +133,10 @@ def optimize_with_consistency(graph: PoseGraph, probability: float
     """
     limit = float(chi2.ppf(probability, 6))
     active = [True] * len(graph.edges)
+    poses = None
     while True:
-        poses = graph.optimize(active)
+        # From the last solution: dropping one loop moves the optimum by little.
+        poses = graph.optimize(active, poses)
         worst, worst_chi2 = -1, limit
         for n, e in enumerate(graph.edges):
             if e.kind == "loop" and active[n]:

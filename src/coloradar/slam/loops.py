@@ -85,8 +85,8 @@ class LoopRecord:
     covariance: np.ndarray | None = None
 
 
-def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, rel_cov, submaps: list[Submap],
-                    settings: SlamSettings) -> list[Candidate]:
+def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_cov: np.ndarray,
+                    submaps: list[Submap], settings: SlamSettings) -> list[Candidate]:
     """Candidates of keyframe ``j`` among the earlier keyframes.
 
     Parameters
@@ -95,8 +95,10 @@ def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, rel_cov, su
         float64 ``(K, 3)``: the keyframes' odometry positions (world) [m].
     path
         float64 ``(K,)``: path length at each keyframe [m].
-    rel_cov
-        ``rel_cov(i, j)`` → ``(3, 3)`` world-frame covariance of the relative position [m²].
+    position_cov
+        float64 ``(K, 3, 3)``: the odometry's marginal position covariance at each keyframe
+        [m²]; the relative position of ``i`` and ``j`` has ``P_j − P_i`` plus the odometry's
+        translation floor per keyframe step.
     """
     earlier = np.flatnonzero(path[:j] <= path[j] - settings.loop_min_separation)
     if earlier.size == 0:
@@ -104,24 +106,17 @@ def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, rel_cov, su
     d = positions[j] - positions[earlier]
     dist = np.linalg.norm(d, axis=1)
     reach = settings.loop_search_radius
-    # A cheap first cut with a generous bound before the per-pair covariances.
-    near = earlier[dist <= reach + 10.0 * settings.loop_gate_sigma]
+    u = d / np.maximum(dist, 1e-9)[:, None]
+    cov = position_cov[j] - position_cov[earlier]
+    var = (np.einsum("ni,nij,nj->n", u, cov, u)
+           + (j - earlier) * settings.odometry_floor_translation**2)
+    gate = np.maximum(dist - reach, 0.0) / np.sqrt(np.maximum(var, 1e-12))
     out = []
-    for i in near:
-        dp = positions[j] - positions[i]
-        n = float(np.linalg.norm(dp))
-        excess = max(0.0, n - reach)
-        if excess > 0:
-            u = dp / n
-            s = float(np.sqrt(max(u @ rel_cov(int(i), j) @ u, 1e-12)))
-            g = excess / s
-            if g > settings.loop_gate_sigma:
-                continue
-        else:
-            g = 0.0
+    for n in np.flatnonzero(gate <= settings.loop_gate_sigma):
+        i = int(earlier[n])
         dd, _ = descriptor_distance(submaps[i].descriptor, submaps[j].descriptor)
         if dd <= settings.max_descriptor_distance:
-            out.append(Candidate(int(i), j, dd, g))
+            out.append(Candidate(i, j, dd, float(gate[n])))
     out.sort(key=lambda c: c.descriptor_distance)
     return out[:settings.max_loop_candidates]
 

@@ -164,15 +164,10 @@ def _loops(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings
     pos = traj.translations[kfs]
     path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pos, axis=0), axis=1))])
     fl_t, fl_r = s.odometry_floor_translation, np.radians(s.odometry_floor_rotation_deg)
-    cov_p = fe.covariance[:, :3, :3]
-
-    def rel_pos_cov(i: int, j: int) -> np.ndarray:
-        d = cov_p[kfs[j]] - cov_p[kfs[i]]
-        return 0.5 * (d + d.T) + (j - i) * fl_t**2 * np.eye(3)
-
+    cov_p = fe.covariance[kfs, :3, :3]
     out = []
     for j in range(kfs.size):
-        for c in loop_candidates(j, pos, path, rel_pos_cov, submaps, s):
+        for c in loop_candidates(j, pos, path, cov_p, submaps, s):
             a, b = int(kfs[c.i]), int(kfs[c.j])
             rel = traj[a].inverse() @ traj[b]
             cov = relative_covariance(fe, a, b, fl_t, fl_r, steps=c.j - c.i)
