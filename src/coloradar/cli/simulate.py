@@ -28,6 +28,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"built-in scene ({', '.join(SCENES)}) or a scene .json file "
                         "(default: corridor)")
     p.add_argument("--duration", type=positive_float, default=10.0, help="seconds (default 10)")
+    p.add_argument("--laps", type=positive_float, metavar="N",
+                   help="instead of --duration: as long as N laps of the scene's closed path "
+                        "take (after --rest), so that the rig comes back (loop closures)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0); also the run "
                    "number in the run's name")
     p.add_argument("--motion", choices=list(MOTION_PROFILES), default="smooth",
@@ -82,6 +85,10 @@ def run(args: argparse.Namespace) -> int:
     sensors: list[str] | None = [s.strip() for s in args.sensors.split(",") if s.strip()]
     if args.sensors == ",".join(SENSOR_CHOICES):
         sensors = None                  # the default: every sensor of the layout
+    if args.laps is not None:
+        from ..sim.point_runs import laps_duration
+
+        args.duration = laps_duration(args.scene, args.laps, speed=args.speed, rest=args.rest)
     prog = StageProgress("simulate", enabled=not args.quiet)
     try:
         res = simulate_run(args.out, scene=args.scene, duration=args.duration, seed=args.seed,

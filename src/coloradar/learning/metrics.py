@@ -1,5 +1,8 @@
 """Metrics for radar-to-lidar outputs: point-set distances and bird's-eye occupancy scores.
 
+The point-set distances are those of :mod:`coloradar.geometry.cloud_metrics` (one
+implementation, re-exported here); this module adds the per-frame scores of a learning output.
+
 Point sets are compared on x y z (metres, one frame for both). With ``d(p, Q)`` the distance
 from ``p`` to the nearest point of ``Q`` (a :class:`scipy.spatial.cKDTree` query):
 
@@ -25,98 +28,28 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from ..errors import SettingsError
+from ..geometry.cloud_metrics import (
+    chamfer_distance,
+    f_from,
+    f_score,
+    mean_or_nan,
+    modified_hausdorff,
+    nearest_distances,
+    occupancy_scores,
+    xyz_points,
+)
 from .views import BevGrid, lidar_bev
 
 __all__ = ["CloudScores", "chamfer_distance", "f_score", "mean_scores", "modified_hausdorff",
            "nearest_distances", "occupancy_scores", "score_clouds"]
 
 
-def _xyz(points: np.ndarray, what: str) -> np.ndarray:
-    p = np.asarray(points)
-    if p.ndim != 2 or p.shape[1] < 3:
-        raise SettingsError(f"{what}: expected points of shape (N, >=3), got {p.shape}")
-    p = p[:, :3].astype(np.float64)
-    return p[np.all(np.isfinite(p), axis=1)]
-
-
-def nearest_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """float64 ``(len(a),)``: distance from every point of ``a`` to the nearest point of ``b``
-    (``inf`` when ``b`` is empty). Points are ``(N, ≥3)``; only x y z are used."""
-    pa, pb = _xyz(a, "a"), _xyz(b, "b")
-    if pb.shape[0] == 0:
-        return np.full(pa.shape[0], np.inf)
-    if pa.shape[0] == 0:
-        return np.zeros(0)
-    return cKDTree(pb).query(pa, k=1)[0]
-
-
-def _mean(d: np.ndarray) -> float:
-    return float(d.mean()) if d.size else math.nan
-
-
-def chamfer_distance(pred: np.ndarray, target: np.ndarray, squared: bool = False) -> float:
-    """Chamfer distance [m, or m² with ``squared``] (see the module docstring)."""
-    d_pt, d_tp = nearest_distances(pred, target), nearest_distances(target, pred)
-    if squared:
-        d_pt, d_tp = d_pt**2, d_tp**2
-    if d_pt.size == 0 and d_tp.size == 0:
-        return 0.0
-    if d_pt.size == 0 or d_tp.size == 0:
-        return math.inf
-    return _mean(d_pt) + _mean(d_tp)
-
-
-def modified_hausdorff(pred: np.ndarray, target: np.ndarray) -> float:
-    """Modified Hausdorff distance [m] (Dubuisson and Jain 1994)."""
-    d_pt, d_tp = nearest_distances(pred, target), nearest_distances(target, pred)
-    if d_pt.size == 0 and d_tp.size == 0:
-        return 0.0
-    if d_pt.size == 0 or d_tp.size == 0:
-        return math.inf
-    return max(_mean(d_pt), _mean(d_tp))
-
-
-def f_score(pred: np.ndarray, target: np.ndarray, threshold: float) -> tuple[float, float, float]:
-    """``(F, precision, recall)`` at ``threshold`` metres (a distance ``<= threshold`` counts)."""
-    if not threshold > 0:
-        raise SettingsError(f"threshold must be positive, got {threshold}")
-    d_pt, d_tp = nearest_distances(pred, target), nearest_distances(target, pred)
-    precision = _mean(d_pt <= threshold)
-    recall = _mean(d_tp <= threshold)
-    return _f(precision, recall), precision, recall
-
-
-def _f(p: float, r: float) -> float:
-    if math.isnan(p) or math.isnan(r):
-        return 0.0 if (math.isnan(p) != math.isnan(r)) else math.nan
-    return 2 * p * r / (p + r) if p + r > 0 else 0.0
-
-
-def occupancy_scores(pred: np.ndarray, target: np.ndarray,
-                     valid: np.ndarray | None = None) -> tuple[float, float, float]:
-    """``(IoU, precision, recall)`` of two occupancy images of the same shape.
-
-    Parameters
-    ----------
-    pred, target
-        Images (any shape, equal); a cell is occupied where the value is > 0.5 (booleans and
-        0/1 occupancy channels both work).
-    valid
-        bool mask of the cells to score (e.g. :attr:`BevProjector.valid`); default all.
-    """
-    a, b = np.asarray(pred), np.asarray(target)
-    if a.shape != b.shape:
-        raise SettingsError(f"occupancy images differ in shape: {a.shape} and {b.shape}")
-    a, b = a > 0.5, b > 0.5
-    if valid is not None:
-        a, b = a[valid], b[valid]
-    tp = int(np.sum(a & b))
-    na, nb, union = int(a.sum()), int(b.sum()), int(np.sum(a | b))
-    return (tp / union if union else math.nan, tp / na if na else math.nan,
-            tp / nb if nb else math.nan)
+# One implementation for the package (coloradar.geometry.cloud_metrics); the names below stay
+# importable from here.
+_xyz = xyz_points
+_mean = mean_or_nan
+_f = f_from
 
 
 @dataclass(frozen=True)

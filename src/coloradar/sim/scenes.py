@@ -1,4 +1,5 @@
-"""Built-in scenes: an indoor corridor, an outdoor courtyard and a mine tunnel.
+"""Built-in scenes: an indoor corridor, an outdoor courtyard, a mine tunnel and a long
+self-similar hallway.
 
 Each is a scene description in the JSON schema of :func:`.scene.scene_from_dict` (so
 ``coloradar simulate --scene corridor --write-scene corridor.json`` gives a file to edit). All
@@ -128,7 +129,39 @@ def _mine() -> dict:
     }
 
 
-SCENES = {"corridor": _corridor, "courtyard": _courtyard, "mine": _mine}
+def _hallway() -> dict:
+    """A long corridor whose every 4 m look alike: the test of false loop closures."""
+    bay = range(-18, 19, 4)
+    boxes = [{"center": [x, s * 1.4, 1.05], "size": [1.0, 0.1, 2.1], "reflectivity": 0.5,
+              "lidar_reflectivity": 0.5, "edge_rcs": 0.05, "name": f"door{i}{'lr'[s > 0]}"}
+             for i, x in enumerate(bay) for s in (-1, 1)]
+    boxes += [{"center": [x + 2.0, s * 1.3, 1.4], "size": [0.3, 0.2, 2.8], "reflectivity": 0.2,
+               "edge_rcs": 0.03, "name": f"pilaster{i}{'lr'[s > 0]}"}
+              for i, x in enumerate(bay[:-1]) for s in (-1, 1)]
+    lights = [{"position": [x, 0.0, 2.75], "rcs": 0.1, "name": f"light{i}"}
+              for i, x in enumerate(bay)]
+    handles = [{"position": [x + 0.35, s * 1.33, 1.0], "rcs": 0.05, "name": f"handle{i}{'lr'[s > 0]}"}
+               for i, x in enumerate(bay) for s in (-1, 1)]
+    return {
+        "name": "hallway",
+        "description": "Long self-similar corridor 40 m x 3 m x 2.8 m: a door on each side, a "
+                       "ceiling light and a pilaster every 4 m, and a person walking; the rig "
+                       "walks it up and down (a closed path: --laps).",
+        "spacing": 0.3,
+        "seed": 4,
+        "rig_path": {"type": "ellipse", "center": [0.0, 0.0, 1.1], "radii": [17.0, 0.3],
+                     "speed": 1.2, "ramp": 0.5},
+        "rooms": [{"min": [-20, -1.5, 0], "max": [20, 1.5, 2.8], "reflectivity": 0.08,
+                   "floor_reflectivity": 0.05, "lidar_reflectivity": 0.5, "name": "hallway"}],
+        "boxes": boxes,
+        "reflectors": lights + handles,
+        "objects": [{"kind": "person", "name": "walker",
+                     "path": {"type": "line", "start": [-15, -0.9, 0], "end": [15, -0.9, 0],
+                              "speed": 1.1}}],
+    }
+
+
+SCENES = {"corridor": _corridor, "courtyard": _courtyard, "mine": _mine, "hallway": _hallway}
 """Names of the built-in scenes."""
 
 

@@ -1,0 +1,74 @@
+"""``coloradar slam RUN --out DIR``: radar SLAM (keyframe submaps, loop closures, a pose graph
+and a radar map) from one radar and the IMU."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+from ..dataset import open_sequence
+from ..dsp.points import POINT_SOURCES
+from ..geometry.cloud_metrics import format_map_scores
+from ._common import positive_float
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "slam", help="radar SLAM: loop closures, a pose graph and a radar map (radar + IMU)",
+        description="Run the radar-inertial filter as front end, build keyframe submaps of "
+                    "static radar points, find loop closures (scan-context descriptor within "
+                    "the odometry's uncertainty, verified by small_gicp registration and "
+                    "consistency tests), optimise the pose graph with GTSAM, and write "
+                    "DIR/trajectory.txt (TUM, every radar frame), odometry.txt (before), "
+                    "keyframes.csv, loops.csv, map.ply, slam.json and slam.png. Evaluate the "
+                    "trajectory with 'coloradar evaluate DIR'. Needs the extra [slam] "
+                    "(gtsam, small_gicp).")
+    p.add_argument("run", help="run folder or .zip")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
+                   help="which radar (default single_chip)")
+    p.add_argument("--source", choices=POINT_SOURCES,
+                   help="point clouds from the sensor's own point clouds, ADC frames or "
+                        "heatmaps (default: pointclouds when present, else adc, else heatmaps)")
+    p.add_argument("--keyframe-distance", type=positive_float, default=1.0, metavar="M",
+                   help="a keyframe every M metres (default 1)")
+    p.add_argument("--keyframe-angle", type=positive_float, default=15.0, metavar="DEG",
+                   help="or every DEG degrees of turn (default 15)")
+    p.add_argument("--refine-odometry", action="store_true",
+                   help="also register consecutive keyframe submaps (scan-to-submap factors)")
+    p.add_argument("--score-map", action="store_true",
+                   help="score the map against the lidar map built with ground truth (the run "
+                        "needs lidar and ground truth); the scores go to slam.json")
+    p.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
+    p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
+    p.add_argument("--no-plot", action="store_true", help="do not write slam.png")
+    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    p.add_argument("--quiet", action="store_true", help="print nothing")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..slam import SlamSettings
+    from ..slam.run import run_slam
+
+    settings = replace(SlamSettings(), keyframe_distance=args.keyframe_distance,
+                       keyframe_angle_deg=args.keyframe_angle,
+                       refine_odometry=args.refine_odometry)
+    seq = open_sequence(args.run, calib=args.calib)
+    out = run_slam(seq, args.out, radar=args.radar, source=args.source, settings=settings,
+                   seed=args.seed, score_against_lidar=args.score_map, plot=not args.no_plot,
+                   overwrite=args.overwrite)
+    if args.quiet:
+        return 0
+    s = out.summary
+    t = sum(s["timings_s"].values())
+    print(f"{seq.name}: {s['frames']} {args.radar} frames, {s['distance_m']:.1f} m in "
+          f"{s['duration_s']:.1f} s; {s['keyframes']} keyframes; {s['loops_accepted']} of "
+          f"{s['loop_candidates']} loop candidates accepted; map of {s['map_points']:,} voxels; "
+          f"{t:.1f} s ({s['duration_s'] / max(t, 1e-9):.1f}x real time)")
+    if out.map_scores is not None:
+        print(format_map_scores(out.map_scores, "map against the lidar map (ground truth):"),
+              end="")
+    for path in out.files:
+        print(f"  wrote {path}")
+    return 0

@@ -1,0 +1,155 @@
+"""The front end of radar SLAM: the radar-inertial filter, seen through one small adapter.
+
+SLAM needs from odometry, per radar frame: the pose ``world_T_base``, its uncertainty, and
+whether the frame had an ego-velocity (its static points are then known by Doppler). This
+module is the only place that reads :class:`coloradar.odometry.rio.RioResult`
+(:func:`frontend_from_rio`), so a change of the filter's output changes this file only.
+
+Relative uncertainty between two keyframes. The filter reports the marginal covariance ``P_k``
+of each pose (position and world-frame attitude). Position and heading are unobservable to a
+radar-inertial filter: their uncertainty only grows, by the (nearly independent) increments of
+each step, so the covariance of the motion from keyframe ``i`` to ``j`` is approximated by
+``P_j − P_i`` (made positive semi-definite), expressed in keyframe ``i``'s frame, plus a floor
+per step (:func:`relative_covariance`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..calib import Calibration
+from ..geometry import Trajectory
+from ..odometry.ego_velocity import EgoVelocityConfig, estimate_ego_velocity
+from ..odometry.rio import RioConfig, RioResult, rio_odometry
+from ..odometry.velocity_track import EgoVelocityTrack
+from ..odometry.zero_velocity import ZeroVelocityConfig, still_world
+
+__all__ = ["FrontEnd", "FrontEndSettings", "estimate_track", "frontend_from_rio", "radar_inertial_frontend",
+           "relative_covariance"]
+
+
+@dataclass(frozen=True)
+class FrontEndSettings:
+    """The front end's settings.
+
+    Attributes
+    ----------
+    ego_velocity
+        Ego-velocity estimator settings (:func:`coloradar.odometry.ego_velocity_config` of the
+        radar).
+    filter
+        The radar-inertial filter's settings (default :class:`~coloradar.odometry.rio.RioConfig`).
+    seed
+        RANSAC seed (frame ``k`` draws with ``SeedSequence([seed, k])``).
+    """
+
+    ego_velocity: EgoVelocityConfig
+    filter: RioConfig | None = None
+    seed: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class FrontEnd:
+    """What SLAM uses of the odometry (M radar frames).
+
+    Attributes
+    ----------
+    trajectory
+        ``world_T_base`` at the frames (IMU-clock times, :attr:`trajectory.timestamps`).
+    frame_timestamps
+        float64 ``(M,)``: the radar stamps of those frames [s].
+    frames
+        int64 ``(M,)``: each pose's frame in the input clouds (the filter starts at the first
+        usable frame, so the first input frames may have no pose).
+    covariance
+        float64 ``(M, 6, 6)``: marginal covariance of position [m²] and world-frame attitude
+        (rotation vector) [rad²].
+    velocity
+        float64 ``(M, 3)``: the radar's ego-velocity, radar frame [m/s] (NaN where none).
+    ok
+        bool ``(M,)``: frames with an ego-velocity.
+    summary
+        A few figures of the filter for ``slam.json``.
+    """
+
+    trajectory: Trajectory
+    frame_timestamps: np.ndarray
+    frames: np.ndarray
+    covariance: np.ndarray
+    velocity: np.ndarray
+    ok: np.ndarray
+    summary: dict
+
+
+def estimate_track(clouds: Iterable[np.ndarray], timestamps: np.ndarray, config: EgoVelocityConfig,
+                   *, seed: int = 0, frame: str = "radar", on_frame=None,
+                   zero_velocity: ZeroVelocityConfig | None = None
+                   ) -> tuple[EgoVelocityTrack, np.ndarray]:
+    """Ego-velocity of every cloud (as :func:`~coloradar.odometry.estimate_ego_velocities`,
+    same seeds), and whether each shows a still world.
+
+    ``on_frame(k, cloud, estimate)`` is called after each frame, so that a caller can keep what
+    it needs of the cloud (the static points) without holding every cloud.
+    """
+    t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
+    zv = zero_velocity or ZeroVelocityConfig()
+    est, still = [], []
+    for k, cloud in enumerate(clouds):
+        rng = np.random.default_rng(np.random.SeedSequence([seed, k]))
+        e = estimate_ego_velocity(cloud, config=config, rng=rng)
+        est.append(e)
+        still.append(still_world(cloud, zv, config.min_range))
+        if on_frame is not None:
+            on_frame(k, cloud, e)
+    return EgoVelocityTrack.from_estimates(t[:len(est)], est, frame), np.array(still, dtype=bool)
+
+
+def frontend_from_rio(res: RioResult, track: EgoVelocityTrack) -> FrontEnd:
+    """The :class:`FrontEnd` of a filter result and the ego-velocities that drove it."""
+    summary = {"static_frames": int(np.sum(res.static)),
+               "time_offset_s": [float(x) for x in res.time_offset[-1]],
+               "gyro_bias_rad_s": [float(x) for x in res.gyro_bias[-1]],
+               "accel_bias_m_s2": [float(x) for x in res.accel_bias[-1]],
+               "stats": res.stats}
+    stamps = np.asarray(res.frame_timestamps, dtype=np.float64)
+    frames = np.searchsorted(track.timestamps, stamps).clip(0, len(track) - 1)
+    return FrontEnd(res.trajectory, stamps, frames.astype(np.int64),
+                    np.asarray(res.covariance, dtype=np.float64), track.velocity[frames],
+                    track.ok[frames], summary)
+
+
+def radar_inertial_frontend(track: EgoVelocityTrack, still: np.ndarray, calib: Calibration,
+                            imu_timestamps: np.ndarray, imu_data: np.ndarray, *, radar: str,
+                            groundtruth: Trajectory | None = None,
+                            config: RioConfig | None = None) -> FrontEnd:
+    """Run the radar-inertial filter (:func:`coloradar.odometry.rio_odometry`) on one radar's
+    ego-velocities and the IMU; the initial pose is the ground truth's when given."""
+    res = rio_odometry(track, calib, imu_timestamps, imu_data, radars=(radar,),
+                       config=config or RioConfig(), groundtruth=groundtruth, still=[still])
+    return frontend_from_rio(res, track)
+
+
+def _psd(a: np.ndarray) -> np.ndarray:
+    w, v = np.linalg.eigh(0.5 * (a + a.T))
+    return (v * np.maximum(w, 0.0)) @ v.T
+
+
+def relative_covariance(fe: FrontEnd, i: int, j: int, floor_translation: float,
+                        floor_rotation: float, steps: int = 1) -> np.ndarray:
+    """Covariance ``(6, 6)`` of the motion ``T_i⁻¹ T_j`` between frames ``i < j``, in GTSAM's
+    ``Pose3`` tangent order (rotation [rad²], then translation [m²], both in frame ``j``, as
+    GTSAM's ``BetweenFactorPose3`` measures its error).
+
+    ``P_j − P_i`` of the marginal position and attitude blocks (see the module docstring),
+    rotated into frame ``j``, plus ``steps`` times the floors' squares.
+    """
+    r_i = fe.trajectory.rotations[j].as_matrix()
+    dp = _psd(fe.covariance[j, :3, :3] - fe.covariance[i, :3, :3])
+    dr = _psd(fe.covariance[j, 3:, 3:] - fe.covariance[i, 3:, 3:])
+    out = np.zeros((6, 6))
+    out[:3, :3] = r_i.T @ dr @ r_i + steps * floor_rotation**2 * np.eye(3)
+    out[3:, 3:] = r_i.T @ dp @ r_i + steps * floor_translation**2 * np.eye(3)
+    return out

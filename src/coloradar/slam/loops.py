@@ -1,0 +1,170 @@
+"""Loop candidates and their verification.
+
+A keyframe ``j`` may close a loop with an earlier keyframe ``i`` when
+
+1. the rig has travelled at least ``loop_min_separation`` metres between them (neighbours
+   overlap trivially);
+2. **Mahalanobis gate** — the odometry does not rule out that they are within
+   ``loop_search_radius`` of each other: with ``Δp`` the odometry's displacement and ``Σ`` the
+   covariance of the motion from ``i`` to ``j`` (:func:`.frontend.relative_covariance`), the
+   excess ``max(0, |Δp| − radius)`` is at most ``loop_gate_sigma`` standard deviations of
+   ``Σ`` along ``Δp``;
+3. their scan-context descriptors are close (:func:`.submaps.descriptor_distance`); the best
+   ``max_loop_candidates`` go on.
+
+Each candidate is **verified**: registered (:func:`.registration.register`) from the odometry's
+relative pose, then accepted only with fitness and overlap above their thresholds and a
+registered pose consistent with the odometry's (chi-square test of
+``Log(T_odo⁻¹ T_reg)`` with the two covariances, 6 dof). In a corridor whose doors repeat every
+few metres, registration snaps to the nearest look-alike; the odometry test rejects a
+look-alike the odometry cannot have drifted to, and the graph's consistency test
+(:func:`.graph.optimize_with_consistency`) what is left.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+
+from ..geometry import SE3
+from .registration import register
+from .settings import SlamSettings
+from .submaps import Submap, descriptor_distance
+
+__all__ = ["Candidate", "LoopRecord", "loop_candidates", "verify_loop"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A keyframe pair worth registering: keyframe numbers ``i < j``, descriptor distance,
+    and the gate's standard deviations of excess distance."""
+
+    i: int
+    j: int
+    descriptor_distance: float
+    gate_sigma: float
+
+
+@dataclass(frozen=True, eq=False)
+class LoopRecord:
+    """A verified candidate (accepted or not) for ``loops.csv``.
+
+    Attributes
+    ----------
+    i, j
+        Keyframe numbers (``i`` earlier).
+    descriptor_distance, gate_sigma
+        From the candidate search.
+    fitness, overlap, rmse
+        From registration (rmse [m]).
+    odometry_chi2
+        Squared Mahalanobis distance of the registered pose from the odometry's.
+    accepted
+        Whether it is a factor of the final graph.
+    reason
+        ``"accepted"`` or why not.
+    measured, covariance
+        ``i_T_j`` from registration and its factor covariance ``(6, 6)`` (None if not
+        registered).
+    """
+
+    i: int
+    j: int
+    descriptor_distance: float
+    gate_sigma: float
+    fitness: float
+    overlap: float
+    rmse: float
+    odometry_chi2: float
+    accepted: bool
+    reason: str
+    measured: SE3 | None = None
+    covariance: np.ndarray | None = None
+
+
+def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_cov: np.ndarray,
+                    submaps: list[Submap], settings: SlamSettings) -> list[Candidate]:
+    """Candidates of keyframe ``j`` among the earlier keyframes.
+
+    Parameters
+    ----------
+    positions
+        float64 ``(K, 3)``: the keyframes' odometry positions (world) [m].
+    path
+        float64 ``(K,)``: path length at each keyframe [m].
+    position_cov
+        float64 ``(K, 3, 3)``: the odometry's marginal position covariance at each keyframe
+        [m²]; the relative position of ``i`` and ``j`` has ``P_j − P_i`` plus the odometry's
+        translation floor per keyframe step.
+    """
+    earlier = np.flatnonzero(path[:j] <= path[j] - settings.loop_min_separation)
+    if earlier.size == 0:
+        return []
+    d = positions[j] - positions[earlier]
+    dist = np.linalg.norm(d, axis=1)
+    reach = settings.loop_search_radius
+    u = d / np.maximum(dist, 1e-9)[:, None]
+    cov = position_cov[j] - position_cov[earlier]
+    var = (np.einsum("ni,nij,nj->n", u, cov, u)
+           + (j - earlier) * settings.odometry_floor_translation**2)
+    gate = np.maximum(dist - reach, 0.0) / np.sqrt(np.maximum(var, 1e-12))
+    out = []
+    for n in np.flatnonzero(gate <= settings.loop_gate_sigma):
+        i = int(earlier[n])
+        dd, _ = descriptor_distance(submaps[i].descriptor, submaps[j].descriptor)
+        if dd <= settings.max_descriptor_distance:
+            out.append(Candidate(i, j, dd, float(gate[n])))
+    out.sort(key=lambda c: c.descriptor_distance)
+    return out[:settings.max_loop_candidates]
+
+
+def _log_se3(t: SE3) -> np.ndarray:
+    """First-order tangent ``(ω, v)`` of a small pose (rotation vector, translation)."""
+    return np.concatenate([t.rotation.as_rotvec(), t.translation])
+
+
+PLANAR_RELEASE = (np.radians(10.0), 1.0)
+"""Standard deviations [rad], [m] added to a planar loop's tilt and height."""
+
+
+def verify_loop(c: Candidate, submaps: list[Submap], odometry: SE3, odometry_cov: np.ndarray,
+                settings: SlamSettings, planar: bool = False) -> LoopRecord:
+    """Register candidate ``c`` from the odometry's ``i_T_j`` and test it (module docstring);
+    ``odometry_cov`` is the ``(6, 6)`` covariance of that relative pose.
+
+    ``planar``: the radar measures elevation too coarsely for registration to fix height, roll
+    and pitch (fewer than 3 elevation rows: the single chip, whose odometry is planar for the
+    same reason); the loop then constrains x, y and yaw only (its tilt and height get the
+    loose standard deviations :data:`PLANAR_RELEASE`, and the odometry test ignores them).
+    """
+    reg = register(submaps[c.i], submaps[c.j], odometry, settings)
+    base: dict[str, Any] = dict(i=c.i, j=c.j, descriptor_distance=c.descriptor_distance,
+                                gate_sigma=c.gate_sigma, fitness=reg.fitness,
+                                overlap=reg.overlap, rmse=reg.rmse)
+    floor = np.diag([np.radians(settings.loop_rotation_std_deg) ** 2] * 3
+                    + [settings.loop_translation_std ** 2] * 3)
+    if planar:   # tangent (ω, v) in the base frame: x right, y forward, z up
+        floor += np.diag([PLANAR_RELEASE[0] ** 2] * 2 + [0.0] * 3 + [PLANAR_RELEASE[1] ** 2])
+    cov = (reg.covariance if np.all(np.isfinite(reg.covariance)) else np.full((6, 6), np.nan))
+    if reg.fitness < settings.min_fitness:
+        return LoopRecord(**base, odometry_chi2=np.nan, accepted=False,
+                          reason=f"fitness {reg.fitness:.2f} < {settings.min_fitness:.2f}")
+    if reg.overlap < settings.min_overlap:
+        return LoopRecord(**base, odometry_chi2=np.nan, accepted=False,
+                          reason=f"overlap {reg.overlap:.2f} < {settings.min_overlap:.2f}")
+    if not np.all(np.isfinite(cov)):
+        return LoopRecord(**base, odometry_chi2=np.nan, accepted=False,
+                          reason="registration gave no covariance (degenerate geometry)")
+    factor_cov = cov + floor
+    resid = _log_se3(odometry.inverse() @ reg.target_T_source)
+    # The registration's covariance is at the source (j) frame, as the odometry's.
+    m = float(resid @ np.linalg.solve(factor_cov + odometry_cov, resid))
+    limit = float(chi2.ppf(settings.gate_probability, 6))
+    if m > limit:
+        return LoopRecord(**base, odometry_chi2=m, accepted=False,
+                          reason=f"inconsistent with the odometry (chi2 {m:.1f} > {limit:.1f})")
+    return LoopRecord(**base, odometry_chi2=m, accepted=True, reason="accepted",
+                      measured=reg.target_T_source, covariance=factor_cov)

@@ -1,0 +1,302 @@
+"""Radar SLAM (coloradar.slam): registration, the pose graph, loop verification, map scores, and
+the whole chain on simulated loops, each against an independent reference."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from coloradar.errors import MissingDependencyError
+from coloradar.geometry import SE3
+from coloradar.geometry.cloud_metrics import score_map, voxel_iou
+
+pytest.importorskip("gtsam")
+pytest.importorskip("small_gicp")
+
+from coloradar.slam import SlamSettings
+from coloradar.slam.graph import Edge, PoseGraph, optimize_with_consistency
+from coloradar.slam.loops import Candidate, verify_loop
+from coloradar.slam.registration import register_points
+from coloradar.slam.submaps import Submap, descriptor_distance, scan_context
+
+
+def _room_points(rng: np.random.Generator, n: int = 1500) -> np.ndarray:
+    """Points on the walls, floor and three boxes of a 12 m x 6 m x 3 m room (no symmetry)."""
+    pts = []
+    for _ in range(n):
+        face = rng.integers(0, 5)
+        u, v = rng.uniform(0, 1, 2)
+        if face == 0:
+            pts.append([-6 + 12 * u, -3, 3 * v])
+        elif face == 1:
+            pts.append([-6 + 12 * u, 3, 3 * v])
+        elif face == 2:
+            pts.append([-6, -3 + 6 * u, 3 * v])
+        elif face == 3:
+            pts.append([6, -3 + 6 * u, 3 * v])
+        else:
+            pts.append([-6 + 12 * u, -3 + 6 * v, 0.0])
+    for c, s in (((1.0, 1.5, 0.5), (1.0, 0.6, 1.0)), ((-3.0, -2.0, 0.8), (0.5, 0.5, 1.6)),
+                 ((4.0, -1.0, 0.4), (0.8, 1.2, 0.8))):
+        b = rng.uniform(-0.5, 0.5, (300, 3)) * s
+        b[np.arange(300), rng.integers(0, 3, 300)] = 0.5 * np.sign(rng.uniform(-1, 1, 300)) * \
+            np.asarray(s)[rng.integers(0, 3, 300)]
+        pts.extend((b + c).tolist())
+    return np.asarray(pts)
+
+
+def test_registration_recovers_a_known_transform():
+    rng = np.random.default_rng(1)
+    target = _room_points(rng)
+    truth = SE3(Rotation.from_euler("zyx", [7.0, 1.0, -1.5], degrees=True), np.array([0.4, -0.25, 0.05]))
+    # source = the same scene seen from `truth`: target = truth · source.
+    source = truth.inverse().apply(target) + rng.normal(0, 0.01, target.shape)
+    s = replace(SlamSettings(), max_correspondence=1.0)
+    reg = register_points(target, source, SE3.identity(), s)
+    err = truth.inverse() @ reg.target_T_source
+    assert np.linalg.norm(err.translation) < 0.02, err
+    assert err.rotation.magnitude() < np.radians(0.3)
+    assert reg.fitness > 0.95 and reg.overlap > 0.95
+
+
+def test_registration_uncertainty_is_largest_along_a_featureless_corridor():
+    """Two infinite-looking walls constrain everything but the motion along them: the
+    covariance's largest translational axis is the corridor's (x)."""
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-8, 8, 800)
+    z = rng.uniform(0, 3, 800)
+    side = np.where(rng.uniform(size=800) < 0.5, -1.2, 1.2)
+    walls = np.column_stack([x, side, z])
+    floor = np.column_stack([rng.uniform(-8, 8, 300), rng.uniform(-1.2, 1.2, 300), np.zeros(300)])
+    pts = np.vstack([walls, floor])
+    reg = register_points(pts, pts + rng.normal(0, 0.005, pts.shape), SE3.identity(),
+                          SlamSettings())
+    w, v = np.linalg.eigh(reg.covariance[3:, 3:])
+    assert abs(v[0, -1]) > 0.99, v[:, -1]
+    assert w[-1] > 10 * w[1]
+
+
+def test_pose_graph_matches_the_closed_form_least_squares():
+    """Three poses on a line, two odometry steps and one loop: with rotations held, the
+    optimum of the translations is the weighted linear least squares solution."""
+    s_odo, s_loop = 0.1, 0.05
+    m1, m2, ml = 1.0, 1.1, 2.3
+
+    def edge(i, j, dx, s):
+        cov = np.diag([1e-8] * 3 + [s**2] * 3)
+        return Edge(i, j, SE3(Rotation.identity(), np.array([dx, 0.0, 0.0])), cov,
+                    "loop" if (i, j) == (0, 2) else "odometry")
+
+    init = [SE3(Rotation.identity(), np.array([x, 0.0, 0.0])) for x in (0.0, 1.0, 2.1)]
+    g = PoseGraph(init, [edge(0, 1, m1, s_odo), edge(1, 2, m2, s_odo), edge(0, 2, ml, s_loop)],
+                  robust_kernel="none")
+    poses = g.optimize()
+    # min (x1 - m1)²/so² + (x2 - x1 - m2)²/so² + (x2 - ml)²/sl², x0 = 0
+    a = np.array([[1, 0], [-1, 1], [0, 1]], float) / np.array([[s_odo], [s_odo], [s_loop]])
+    b = np.array([m1, m2, ml]) / np.array([s_odo, s_odo, s_loop])
+    x = np.linalg.lstsq(a, b, rcond=None)[0]
+    np.testing.assert_allclose([poses[1].translation[0], poses[2].translation[0]], x, atol=1e-6)
+    assert abs(poses[0].translation[0]) < 1e-6
+
+
+def test_a_planted_false_loop_is_dropped_by_the_consistency_test():
+    """A square of 8 poses (exact odometry, realistic noise), two true loops and one false loop
+    that claims pose 6 is 3 m from where it is: the false one is dropped, the true ones kept,
+    and the poses are those of the graph without it (and near the truth)."""
+    rng = np.random.default_rng(3)
+    truth = [SE3(Rotation.from_euler("z", 90 * (k // 2), degrees=True),
+                 np.array([[0, 0], [2, 0], [4, 0], [4, 2], [4, 4], [2, 4], [0, 4], [0, 2]][k] + [0.0]))
+             for k in range(8)]
+    cov = np.diag([np.radians(0.5) ** 2] * 3 + [0.02**2] * 3)
+    edges = []
+    for k in range(1, 8):
+        rel = truth[k - 1].inverse() @ truth[k]
+        noisy = rel @ SE3(Rotation.from_rotvec(rng.normal(0, np.radians(0.3), 3)),
+                          rng.normal(0, 0.01, 3))
+        edges.append(Edge(k - 1, k, noisy, cov))
+    for i, j in ((0, 7), (1, 7)):
+        edges.append(Edge(i, j, truth[i].inverse() @ truth[j], cov, "loop"))
+    wrong = truth[2].inverse() @ truth[6] @ SE3(Rotation.identity(), np.array([3.0, 0.0, 0.0]))
+    edges.append(Edge(2, 6, wrong, cov, "loop"))
+    poses, active = optimize_with_consistency(PoseGraph(list(truth), edges), 0.999)
+    assert active[-1] is False and all(active[:-1])
+    clean = PoseGraph(list(truth), edges[:-1]).optimize()
+    for p, c, t in zip(poses, clean, truth, strict=True):
+        assert np.linalg.norm(p.translation - c.translation) < 1e-4   # LM tolerance
+        assert np.linalg.norm(p.translation - t.translation) < 0.1
+
+
+def _hallway_submap(x: float, settings: SlamSettings) -> Submap:
+    """The hallway scene's static scatterers within 6 m of (x, 0), in a frame at (x, 0, 1.1)
+    facing +x: a submap as the radar would see it (less noise and sparsity)."""
+    from coloradar.sim import builtin_scene
+
+    p = builtin_scene("hallway").static_scatterers.position
+    rel = p - np.array([x, 0.0, 1.1])
+    near = rel[np.linalg.norm(rel[:, :2], axis=1) < 6.0]
+    cov = np.broadcast_to(np.eye(3) * 0.03**2, (near.shape[0], 3, 3)).copy()
+    return Submap(0, near, np.ones(near.shape[0], np.float32), cov, scan_context(near, settings))
+
+
+def test_a_look_alike_in_a_self_similar_hallway_is_rejected():
+    """Places 4 m apart in the hallway (one period of its doors and lights) look the same: the
+    descriptors agree and registration snaps to the look-alike with a high fitness. A candidate
+    whose odometry guess (σ 0.2 m) is 3 m off, nearer the look-alike (0 m) than the truth
+    (4 m), must be rejected by the odometry test; the same pair with the odometry close to the
+    truth is accepted with the true relative pose."""
+    s = SlamSettings()
+    a, b = _hallway_submap(-2.0, s), _hallway_submap(2.0, s)
+    dist, _ = descriptor_distance(a.descriptor, b.descriptor)
+    assert dist < 0.2                                     # they look alike
+    cov = np.diag([np.radians(1.0) ** 2] * 3 + [0.2**2] * 3)
+    truth = SE3(Rotation.identity(), np.array([4.0, 0.0, 0.0]))
+    c = Candidate(0, 1, dist, 0.0)
+    off = SE3(Rotation.identity(), np.array([1.0, 0.1, 0.0]))      # drifted 3 m
+    rec = verify_loop(c, [a, b], off, cov, s)
+    assert rec.fitness > 0.9, rec                          # the look-alike fits
+    assert not rec.accepted and "odometry" in rec.reason
+    near = SE3(Rotation.identity(), np.array([3.8, -0.1, 0.0]))
+    ok = verify_loop(c, [a, b], near, cov, s)
+    assert ok.accepted, ok.reason
+    assert np.linalg.norm(ok.measured.translation - truth.translation) < 0.05
+
+
+def test_unrelated_places_fail_verification():
+    s = SlamSettings()
+    rng = np.random.default_rng(4)
+    room = _room_points(rng)
+    a = Submap(0, room, np.ones(len(room), np.float32),
+               np.broadcast_to(np.eye(3) * 1e-3, (len(room), 3, 3)).copy(), scan_context(room, s))
+    b = _hallway_submap(0.0, s)
+    rec = verify_loop(Candidate(0, 1, 0.1, 0.0), [a, b], SE3.identity(),
+                      np.diag([1e-3] * 3 + [0.1] * 3), s)
+    assert not rec.accepted and ("fitness" in rec.reason or "overlap" in rec.reason)
+
+
+def test_map_scores_against_brute_force():
+    rng = np.random.default_rng(5)
+    pred = rng.uniform(0, 3, (300, 3))
+    ref = rng.uniform(0, 3, (400, 3))
+    sc = score_map(pred, ref, threshold=0.25, voxel=0.5)
+    d = np.linalg.norm(pred[:, None, :] - ref[None, :, :], axis=2)
+    d_pr, d_rp = d.min(axis=1), d.min(axis=0)
+    assert sc.chamfer == pytest.approx(d_pr.mean() + d_rp.mean(), rel=1e-12)
+    p, r = np.mean(d_pr <= 0.25), np.mean(d_rp <= 0.25)
+    assert sc.precision == pytest.approx(p) and sc.recall == pytest.approx(r)
+    assert sc.f_score == pytest.approx(2 * p * r / (p + r))
+    va = {tuple(math.floor(c / 0.5) for c in q) for q in pred}
+    vb = {tuple(math.floor(c / 0.5) for c in q) for q in ref}
+    assert sc.voxel_iou == pytest.approx(len(va & vb) / len(va | vb))
+    assert voxel_iou(pred, pred, 0.1) == 1.0
+    assert math.isnan(voxel_iou(np.zeros((0, 3)), np.zeros((0, 3)), 0.1))
+
+
+def test_learning_metrics_are_the_shared_implementation():
+    from coloradar.geometry import cloud_metrics
+    from coloradar.learning import metrics
+
+    assert metrics.chamfer_distance is cloud_metrics.chamfer_distance
+    assert metrics.f_score is cloud_metrics.f_score
+
+
+@pytest.fixture(scope="module")
+def corridor_loop():
+    """1.3 laps of the corridor (point level, single chip): the rig comes back to its start."""
+    from coloradar.odometry import ego_velocity_config
+    from coloradar.sim.point_runs import laps_duration, simulate_point_run
+    from coloradar.slam import slam_from_clouds
+
+    run = simulate_point_run("corridor", laps_duration("corridor", 1.3, rest=2.0), 2024,
+                             lidar_every=6.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = slam_from_clouds(run.clouds, run.timestamps, run.calib, run.imu_timestamps,
+                               run.imu_data, radar="single_chip",
+                               frontend=ego_velocity_config(run.calib.single_chip),
+                               groundtruth=run.groundtruth)
+    return run, res
+
+
+def test_slam_closes_the_corridor_loop_with_true_loops_only(corridor_loop):
+    """Every accepted loop's relative pose is the ground truth's (within 0.2 m; a false loop
+    would be metres off), and the trajectory is not made worse."""
+    from coloradar.odometry.metrics import absolute_trajectory_error
+
+    run, res = corridor_loop
+    gt = run.groundtruth
+    acc = res.accepted_loops
+    assert len(acc) >= 3
+    for lp in acc:   # every accepted loop agrees with the ground truth's relative pose
+        ti, tj = (res.trajectory.timestamps[res.keyframes[k]] for k in (lp.i, lp.j))
+        true_rel = gt.at(ti).inverse() @ gt.at(tj)
+        assert np.linalg.norm(true_rel.translation - lp.measured.translation) < 0.2
+    odo = absolute_trajectory_error(res.odometry, gt)
+    slam = absolute_trajectory_error(res.trajectory, gt)
+    # One short lap: the odometry has barely drifted (its ATE is a few cm); SLAM must not make
+    # it worse (the gain over longer runs is the Monte Carlo's, docs/slam.md).
+    assert slam.rmse < odo.rmse + 0.01, (slam.rmse, odo.rmse)
+    assert len(res.trajectory) == len(res.odometry)
+
+
+def test_slam_map_lies_on_the_true_surfaces(corridor_loop):
+    run, res = corridor_loop
+    sc = score_map(res.map_points, run.reference_map, threshold=0.3)
+    assert sc.precision >= 0.9, sc
+    assert np.all(res.map_points[:, 3] >= SlamSettings().map_min_keyframes)
+
+
+def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
+    from coloradar.cli.main import main
+    from coloradar.sim.point_runs import simulate_point_run, write_point_run
+
+    run = simulate_point_run("corridor", 12.0, 7, lidar_every=None)
+    folder = write_point_run(run, tmp_path / "data", "11_21_2026_sim_corridor_run7")
+    out = tmp_path / "slam"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["slam", str(folder), "--out", str(out), "--no-plot"]) == 0
+        txt = capsys.readouterr().out
+        assert "keyframes" in txt
+        for name in ("trajectory.txt", "odometry.txt", "keyframes.csv", "loops.csv", "map.ply",
+                     "slam.json"):
+            assert (out / name).is_file(), name
+        info = json.loads((out / "slam.json").read_text())
+        assert info["radar"] == "single_chip" and info["summary"]["keyframes"] >= 5
+        rows = [ln for ln in (out / "trajectory.txt").read_text().splitlines()
+                if ln and not ln.startswith("#")]
+        assert len(rows) == info["summary"]["frames"]
+        assert main(["evaluate", str(out), "--no-plot", "--quiet"]) == 0
+        ev = json.loads((out / "evaluation.json").read_text())
+        assert ev["ate"]["rmse_m"] < 0.1
+        assert main(["slam", str(folder), "--out", str(out), "--no-plot"]) != 0   # no overwrite
+        assert "overwrite" in capsys.readouterr().err
+        # A map scored against itself: every point on the reference.
+        assert main(["map-score", str(out / "map.ply"), "--reference", str(out / "map.ply"),
+                     "--json"]) == 0
+        sc = json.loads(capsys.readouterr().out)
+        assert sc["precision"] == 1.0 and sc["chamfer"] == 0.0 and sc["voxel_iou"] == 1.0
+        # coloradar benchmark's method: the same trajectory through the callable.
+        from coloradar.slam.run import benchmark_method
+
+        tum = benchmark_method(folder, tmp_path / "bm", {"radar": "single_chip"})
+        assert tum.read_text().splitlines()[-1] == (out / "trajectory.txt").read_text().splitlines()[-1]
+        with pytest.raises(Exception, match="unknown settings"):
+            benchmark_method(folder, tmp_path / "bm2", {"no_such_setting": 1})
+
+
+def test_without_gtsam_the_error_names_the_extra(monkeypatch):
+    from coloradar.slam import _deps
+
+    monkeypatch.setitem(sys.modules, "gtsam", None)
+    with pytest.raises(MissingDependencyError, match=r"coloradar\[slam\]"):
+        _deps.gtsam()
+    monkeypatch.setitem(sys.modules, "small_gicp", None)
+    with pytest.raises(MissingDependencyError, match=r"coloradar\[slam\]"):
+        _deps.small_gicp()
