@@ -3,6 +3,7 @@ the whole chain on simulated loops, each against an independent reference."""
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import sys
@@ -289,6 +290,14 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
         assert tum.read_text().splitlines()[-1] == (out / "trajectory.txt").read_text().splitlines()[-1]
         with pytest.raises(Exception, match="unknown settings"):
             benchmark_method(folder, tmp_path / "bm2", {"no_such_setting": 1})
+        # ... and `coloradar benchmark --estimator slam` beside the filter, scored on the truth.
+        assert main(["benchmark", str(tmp_path / "data"), "--out", str(tmp_path / "bench"),
+                     "--estimator", "slam", "--estimator", "default", "--radar", "single_chip",
+                     "--jobs", "1", "--quiet"]) == 0
+        with open(tmp_path / "bench" / "benchmark.csv", newline="") as f:
+            table = {row["method"]: row for row in csv.DictReader(f)}
+        assert set(table) == {"slam", "coloradar"}
+        assert table["slam"]["status"] == "ok" and float(table["slam"]["ate_rmse_m"]) < 0.1
 
 
 def test_without_gtsam_the_error_names_the_extra(monkeypatch):

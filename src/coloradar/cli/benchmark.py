@@ -59,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     m = p.add_argument_group("methods (several side by side; default: coloradar's odometry)")
     m.add_argument("--estimator", action="append", default=[], metavar="NAME",
                    help="coloradar odometry estimator to run (repeatable; 'default' for its "
-                        "default, 'none' to run none of ours)")
+                        "default, 'slam' for coloradar slam (extra [slam]), 'none' to run "
+                        "none of ours)")
     m.add_argument("--estimate", action="append", default=[], metavar="[NAME=]DIR",
                    help="a method's estimates: DIR/<run>.txt or DIR/<run>/trajectory.txt "
                         "(TUM, world_T_base), optionally DIR/<run>/ego_velocity.csv "
@@ -106,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
         builtin_method,
         callable_method,
         format_table,
+        function_method,
         tum_method,
     )
 
@@ -116,7 +118,12 @@ def run(args: argparse.Namespace) -> int:
     if "none" in estimators and len(estimators) > 1:
         raise ColoradarError("--estimator none runs none of ours; drop the other --estimator")
     for est in estimators:
-        if est != "none":
+        if est == "slam":
+            # a higher layer than odometry: handed to the benchmark as a function method
+            from ..slam.run import benchmark_method
+
+            methods.append(function_method(benchmark_method, "slam"))
+        elif est != "none":
             methods.append(builtin_method(None if est == "default" else est))
     for text in args.estimate:
         name, folder = _named(text)

@@ -9,7 +9,7 @@ from dataclasses import replace
 from ..dataset import open_sequence
 from ..dsp.points import POINT_SOURCES
 from ..geometry.cloud_metrics import format_map_scores
-from ._common import positive_float
+from ._common import check_input, check_output_outside_dataset, positive_float
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
     settings = replace(SlamSettings(), keyframe_distance=args.keyframe_distance,
                        keyframe_angle_deg=args.keyframe_angle,
                        refine_odometry=args.refine_odometry)
+    check_input(args.run)
+    check_output_outside_dataset(args.out, (args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
     out = run_slam(seq, args.out, radar=args.radar, source=args.source, settings=settings,
                    seed=args.seed, score_against_lidar=args.score_map, plot=not args.no_plot,
