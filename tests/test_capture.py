@@ -5,6 +5,7 @@ written values and show the simulated targets at their range, angle and range ra
 from __future__ import annotations
 
 import json
+import os
 import runpy
 import warnings
 from pathlib import Path
@@ -300,3 +301,36 @@ def test_readme_example_capture_imports_and_processes_to_its_targets(tmp_path, c
         for r, a, v in script["TARGETS"]:
             assert np.any((np.abs(rng - r) < 0.4) & (np.abs(az - a) < 3)
                           & (np.abs(pts[:, 4] - v) < 0.4)), (k, r, a, v)
+
+
+def test_cli_replaces_its_own_import_with_overwrite_and_gives_normal_modes(tmp_path, capsys,
+                                                                            monkeypatch):
+    """``import-capture … --overwrite`` replaces a run an earlier import wrote (the one-output
+    rule must not take it for the user's dataset); the run's folders get the mode a plain
+    ``mkdir`` gives."""
+    monkeypatch.chdir(tmp_path)
+    script = runpy.run_path(str(ROOT / "docs" / "capture_example.py"))
+    script["main"](Path("example_capture"))
+    argv = ["import-capture", "example_capture/adc_data.bin", "example_run", "--config",
+            "example_capture/profile.cfg", "--board", "AWR1843BOOST"]
+    assert main(argv) == 0
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (Path("example_run").stat().st_mode & 0o777) == 0o777 & ~umask
+    assert main(argv) == 1                                   # exists: refused
+    assert "--overwrite" in capsys.readouterr().err
+    assert main([*argv, "--overwrite"]) == 0
+    assert "4 single_chip frames" in capsys.readouterr().out
+
+
+def test_mmwcas_empty_index_is_named(tmp_path):
+    cap, cfg, _, _ = _cascade(tmp_path, nf=2)
+    idx = cap / "master_0000_idx.bin"
+    raw = bytearray(idx.read_bytes())
+    raw[12:16] = (0).to_bytes(4, "little")                    # numIdx = 0
+    idx.write_bytes(bytes(raw))
+    with pytest.raises(FormatError, match=r"master_0000_idx\.bin: the index header says 0 frames"):
+        import_capture(cap, tmp_path / "run", config=cfg)
+    assert not (tmp_path / "run").exists()
+    with pytest.raises(Exception, match="inside the capture"):
+        import_capture(cap, cap / "run", config=cfg)

@@ -58,8 +58,14 @@ def test_score_reads_processed_radar_point_clouds_as_five_columns(tmp_path):
     fm.write_lidar_pointcloud(tmp_path / "lidar_pointcloud_1.bin", lid)
     np.testing.assert_array_equal(read_prediction(tmp_path / "lidar_pointcloud_1.bin"),
                                   lid[:, :3])
+    (tmp_path / "heatmaps" / "data").mkdir(parents=True)
+    (tmp_path / "heatmaps" / "data" / "heatmap_3.bin").write_bytes(bytes(4 * 6))
     with pytest.raises(FormatError, match="heatmap"):
-        read_prediction(tmp_path / "heatmap_3.bin")
+        read_prediction(tmp_path / "heatmaps" / "data" / "heatmap_3.bin")
+    # A prediction of the user's own named frame_<i>.bin (outside adc_samples/) is xyz rows.
+    xyz = np.arange(6, dtype=np.float32).reshape(2, 3)
+    xyz.tofile(tmp_path / "frame_000012.bin")
+    np.testing.assert_array_equal(read_prediction(tmp_path / "frame_000012.bin"), xyz)
 
 
 def test_score_refuses_a_bad_file_before_scoring_anything(root, tmp_path, capsys, monkeypatch):

@@ -352,6 +352,9 @@ def _check_target(out: Path, capture: Path, overwrite: bool) -> None:
     if out_r == cap_r or out_r in cap_r.parents:
         raise SettingsError(f"{out}: the output run would contain the capture {capture}; write "
                             "the run elsewhere")
+    if cap_r in out_r.parents:
+        raise SettingsError(f"{out}: lies inside the capture {capture}; coloradar never writes "
+                            "into its inputs: write the run elsewhere")
     if out.exists() or out.is_symlink():
         if not overwrite:
             raise OutputExistsError(f"{out}: exists; pass --overwrite (overwrite=True) to replace "
@@ -472,6 +475,10 @@ def import_capture(capture: str | os.PathLike[str], out_run: str | os.PathLike[s
           else _dca1000_frames(cap, cfg, spec, packets=kind == "packets"))
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    # mkdtemp makes the folder 0700; the run gets the mode a plain mkdir would give it.
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)
     try:
         left, zeroed, written = _write_run(tmp, fr, radar, spec)
         notes = list(fr.notes)

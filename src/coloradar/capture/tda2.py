@@ -92,6 +92,10 @@ def read_idx(path: Path) -> tuple[int, int, np.ndarray, np.ndarray]:
     n = int(head["numIdx"])
     body = raw[IDX_HEADER.itemsize:]
     have = len(body) // IDX_ENTRY.itemsize
+    if n == 0:
+        # The frames' times come from here alone: an empty index leaves them unknown.
+        raise FormatError(f"{path}: the index header says 0 frames; the capture's frame times "
+                          "are unknown (an interrupted recording?)")
     if have < n:
         raise FormatError(f"{path}: the header says {n} frames but the index holds {have} "
                           f"entries of {IDX_ENTRY.itemsize} bytes")

@@ -108,7 +108,10 @@ _CALIB_NAMES = ("calib", "calib.zip")
 
 
 def _has_run_marker(folder: Path) -> bool:
-    return any((folder / m).is_dir() for m in _RUN_MARKERS)
+    """A recorded run: a radar's ADC folder, or two of a run's sensor folders (a user's own
+    folder with one ``camera/`` or ``imu/`` in it is no run)."""
+    found = [m for m in _RUN_MARKERS if (folder / m).is_dir()]
+    return any("/" in m for m in found) or len(found) >= 2
 
 
 def _inside(path: Path, folder: Path) -> bool:

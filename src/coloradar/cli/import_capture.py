@@ -4,8 +4,10 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..capture import import_capture
+from ..capture.importer import MARKER
 from ._common import check_output_outside_dataset
 
 
@@ -49,7 +51,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output_outside_dataset(args.out, (args.capture, args.config))
+    out = Path(args.out)
+    if (out / MARKER).is_file():
+        # A run an earlier import wrote (replaced with --overwrite, else refused by the
+        # importer as existing): the rule applies to where it lies.
+        check_output_outside_dataset(out.parent, (args.capture, args.config))
+    else:
+        check_output_outside_dataset(out, (args.capture, args.config))
     res = import_capture(
         args.capture, args.out, config=args.config, board=args.board,
         start_time=args.start_time, iq_order=args.iq_order, lanes=args.lanes,

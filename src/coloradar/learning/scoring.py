@@ -42,7 +42,9 @@ PREDICTION_SUFFIXES = (".npy", ".pcd", ".ply", ".bin")
 # Columns of the .bin files whose kind the name says (coloradar.formats.binary), and names of
 # .bin files that are not point clouds at all.
 _BIN_KINDS = {"radar_pointcloud": 5, "lidar_pointcloud": 4}
-_NOT_POINTS = {"heatmap": "a heatmap", "frame": "a raw ADC frame"}
+# (folder the dataset keeps them in, what they are): a frame_12.bin of the user's own elsewhere is
+# a prediction like any other.
+_NOT_POINTS = {"heatmap": ("heatmaps", "a heatmap"), "frame": ("adc_samples", "a raw ADC frame")}
 _TRAILING_INT = re.compile(r"(\d+)(?!.*\d)")
 
 
@@ -60,8 +62,9 @@ def bin_columns_of(path: str | os.PathLike[str], bin_columns: int | None = None)
     """
     p = Path(path)
     prefix = _TRAILING_INT.sub("", p.stem).rstrip("_")
-    if prefix in _NOT_POINTS:
-        raise FormatError(f"{p}: {_NOT_POINTS[prefix]} (by its name), not a point cloud")
+    if prefix in _NOT_POINTS and _NOT_POINTS[prefix][0] in p.resolve().parts:
+        raise FormatError(f"{p}: {_NOT_POINTS[prefix][1]} (by its name and folder), not a point "
+                          "cloud")
     kind = _BIN_KINDS.get(prefix)
     if kind is not None and bin_columns is not None and bin_columns != kind:
         raise SettingsError(f"{p}: a {prefix.replace('_', ' ')} file has {kind} values a row, "

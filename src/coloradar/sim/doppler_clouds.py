@@ -10,8 +10,8 @@ draws them directly from the rig's analytic motion:
   low sees more above than below), range rate ``ṙ = −uᵀ y`` (``y`` the radar origin's
   velocity, radar frame) plus Gaussian Doppler noise, the reported direction the true one
   turned by Gaussian azimuth and elevation errors;
-- **ghosts** (multipath, false alarms): random directions, range rates uniform over the
-  unambiguous interval;
+- **ghosts** (multipath, false alarms): random directions, range rates uniform over
+  ``±(speed + 1 m/s)``, the span static points and near movers occupy;
 - **movers**: a compact cluster moving with its own velocity.
 
 Range rates are folded into ``[−v_max, v_max)`` when ``max_velocity`` is set. Clouds are
