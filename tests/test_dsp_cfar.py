@@ -205,7 +205,8 @@ def test_common_mode_noise_measures_the_formula_looks(rho):
 @pytest.mark.parametrize("pfa", [1e-2, 1e-3])
 def test_chain_holds_its_false_alarm_rate_on_common_mode_noise(pfa):
     """The chain's CFAR on noise whose channels share a planted common component (amplitude
-    correlation 0.8): within 2x of the requested rate with the measured looks, and far over it
+    correlation 0.95, power correlation 0.90, as the real frame's 0.97): within 2x of the
+    requested rate with the measured looks (1.4x; Monte Carlo in docs/dsp.md), and far over it
     when the channels are taken as independent looks (cfar_looks="channels", the default)."""
     from coloradar.calib import preset_radar
     from coloradar.dsp import RadarProcessor
@@ -220,7 +221,7 @@ def test_chain_holds_its_false_alarm_rate_on_common_mode_noise(pfa):
     g = np.random.default_rng(29)
     counts = np.zeros(2)
     for _ in range(frames):
-        x = _common_mode_channels(g, (w.num_chirps, w.num_samples), w.num_tx * w.num_rx, 0.8)
+        x = _common_mode_channels(g, (w.num_chirps, w.num_samples), w.num_tx * w.num_rx, 0.95)
         x = x.reshape(w.frame_shape)
         counts += [len(auto.detect(x)), len(chans.detect(x))]
     rate = counts / (frames * cells)
