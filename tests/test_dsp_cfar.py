@@ -177,7 +177,8 @@ def _ca_ratio(power, looks):
 
 def test_independent_channels_measure_as_that_many_looks():
     """White noise in every channel: the sum is an L-look Gamma, and the measured looks come
-    out as L (not fewer: the threshold of the white-noise case is not raised)."""
+    out as L (not fewer: the threshold of the white-noise case is not raised), with the tail
+    matched at 1e-4 too."""
     from coloradar.dsp.cfar import effective_looks
     g = np.random.default_rng(3)
     for looks in (4, 8, 12):
@@ -185,7 +186,7 @@ def test_independent_channels_measure_as_that_many_looks():
         for _ in range(3):
             p = np.sum(np.abs(_common_mode_channels(g, (128, 128), looks, 0.0)) ** 2, axis=0)
             ratio, n = _ca_ratio(p.astype(np.float64), looks)
-            ks.append(effective_looks(ratio, n, looks))
+            ks += [effective_looks(ratio, n, looks), effective_looks(ratio, n, looks, pfa=1e-4)]
         assert min(ks) >= 0.9 * looks, (looks, ks)
 
 
@@ -203,11 +204,13 @@ def test_common_mode_noise_measures_the_formula_looks(rho):
 
 
 @pytest.mark.parametrize("pfa", [1e-2, 1e-3])
-def test_chain_holds_its_false_alarm_rate_on_common_mode_noise(pfa):
+@pytest.mark.parametrize("rho", [0.5, 0.95])
+def test_chain_holds_its_false_alarm_rate_on_common_mode_noise(pfa, rho):
     """The chain's CFAR on noise whose channels share a planted common component (amplitude
-    correlation 0.95, power correlation 0.90, as the real frame's 0.97): within 2x of the
-    requested rate with the measured looks (1.4x; Monte Carlo in docs/dsp.md), and far over it
-    when the channels are taken as independent looks (cfar_looks="channels", the default)."""
+    correlation ρ; 0.95: power correlation 0.90, as the real frame's 0.97): within 2x of the
+    requested rate with the measured looks (Monte Carlo in docs/dsp.md: 0.8-1.3x; a Gamma
+    matched in variance alone gave 2.9x at ρ = 0.5, 1e-3), and far over it when the channels
+    are taken as independent looks (cfar_looks="channels", the default)."""
     from coloradar.calib import preset_radar
     from coloradar.dsp import RadarProcessor
     calib = preset_radar("single_chip")
@@ -221,7 +224,7 @@ def test_chain_holds_its_false_alarm_rate_on_common_mode_noise(pfa):
     g = np.random.default_rng(29)
     counts = np.zeros(2)
     for _ in range(frames):
-        x = _common_mode_channels(g, (w.num_chirps, w.num_samples), w.num_tx * w.num_rx, 0.95)
+        x = _common_mode_channels(g, (w.num_chirps, w.num_samples), w.num_tx * w.num_rx, rho)
         x = x.reshape(w.frame_shape)
         counts += [len(auto.detect(x)), len(chans.detect(x))]
     rate = counts / (frames * cells)

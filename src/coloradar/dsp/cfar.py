@@ -41,7 +41,10 @@ independent looks. :func:`effective_looks` measures the looks from the map itsel
 method of moments (a Gamma matched in its first two moments, as Welch–Satterthwaite) on the
 ratio of every cell to its CA noise estimate: the ratio is scale-free, so a noise floor that
 changes with range does not count as texture, and cells far above any threshold of ``1 … L``
-looks (returns) are left out.
+looks (returns) are left out. Where the excess comes from one component common to every
+channel, the sum is ``λ₁E₁ + λ₂·Gamma(L − 1)`` (the channels' covariance's eigenvalues), whose
+common look carries the tail: the looks are then lowered to match that tail at the requested
+false-alarm probability.
 """
 
 from __future__ import annotations
@@ -198,8 +201,9 @@ def effective_train_cells(guard: tuple[int, ...], train: tuple[int, ...],
 
 
 def effective_looks(ratio: np.ndarray, num_train: float, max_looks: float,
-                    trim_pfa: float = 1e-6) -> float:
-    """Looks of a Gamma that matches the first two moments of noise cells' CFAR ratios.
+                    pfa: float | None = None, trim_pfa: float = 1e-6) -> float:
+    """Looks of a Gamma that matches the first two moments of noise cells' CFAR ratios (and,
+    with ``pfa``, the tail of a sum with one common look at that probability).
 
     For cells of ``k``-look Gamma noise divided by a CA estimate with the variance of
     ``num_train`` independent cells (``Z ~ Gamma(n·k)/(n·k)``, independent of the cell),
@@ -216,6 +220,12 @@ def effective_looks(ratio: np.ndarray, num_train: float, max_looks: float,
         Independent-cell equivalent ``N_eff`` of the CA training set.
     max_looks
         Channels summed (the independent-noise looks): the upper bound.
+    pfa
+        Where given, the looks are lowered to those whose Gamma has the tail, at ``pfa``, of the
+        sum that has the measured variance when its excess comes from one component common
+        to every channel (amplitude correlation ``ρ``): ``λ₁E₁ + λ₂·Gamma(L − 1)`` with
+        ``λ₁ = 1 + (L − 1)ρ``, ``λ₂ = 1 − ρ`` (the channels' covariance's eigenvalues). The
+        common look carries that sum's tail, which a Gamma of the same variance under-states.
     trim_pfa
         False-alarm probability of the one-look threshold above which cells are left out.
 
@@ -243,7 +253,38 @@ def effective_looks(ratio: np.ndarray, num_train: float, max_looks: float,
         return top
     if excess(lo) <= 0:
         return lo
-    return float(optimize.brentq(excess, lo, top, xtol=1e-6))
+    k = float(optimize.brentq(excess, lo, top, xtol=1e-6))
+    return k if pfa is None else _tail_looks(k, top, pfa)
+
+
+def _tail_looks(k: float, L: float, pfa: float) -> float:
+    """Looks ``≤ k`` whose Gamma (mean ``L``) exceeds the same level at ``pfa`` as the sum of
+    ``L`` channels with a common component whose variance is that of ``k`` looks."""
+    if k >= L or L < 2:
+        return k
+    rho = np.sqrt((L / k - 1.0) / (L - 1.0))         # k = L/(1 + (L − 1)ρ²)
+    l1, l2, m = 1.0 + (L - 1.0) * rho, 1.0 - rho, L - 1.0
+
+    def log_sf(t: float) -> float:       # P(λ₁E₁ + λ₂G(m) > t), both terms positive
+        a = special.gammaincc(m, t / l2) if l2 > 0 else 0.0
+        x = t * (1.0 / l2 - 1.0 / l1) if l2 > 0 else np.inf
+        p_m = special.gammainc(m, x)
+        b = np.exp(-t / l1 - m * np.log1p(-l2 / l1) + np.log(p_m)) if p_m > 0 else 0.0
+        return float(np.log(a + b))
+
+    hi = L
+    while log_sf(hi) > np.log(pfa):
+        hi *= 2.0
+    t = optimize.brentq(lambda v: log_sf(v) - np.log(pfa), 0.0, hi, xtol=1e-9 * hi)
+
+    def gap(kk: float) -> float:          # Gamma(kk) of mean L over the level, log
+        return float(np.log(special.gammaincc(kk, kk * t / L)) - np.log(pfa))
+
+    if gap(k) >= 0:
+        return k
+    if gap(1.0) <= 0:
+        return 1.0
+    return float(optimize.brentq(gap, 1.0, k, xtol=1e-6))
 
 
 def _os_rank(rank: float | int, n: int) -> int:

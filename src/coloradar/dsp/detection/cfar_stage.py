@@ -225,7 +225,7 @@ class CFARStage:
                                                 s.cfar_excision))
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = stat[:, r0:] / res.noise
-        return effective_looks(ratio, self.ca_train, looks)
+        return effective_looks(ratio, self.ca_train, looks, pfa=s.pfa)
 
     def _run(self, stat: np.ndarray, looks: float) -> tuple[np.ndarray, np.ndarray]:
         s = self.settings
