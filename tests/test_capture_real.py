@@ -18,7 +18,13 @@ from coloradar.calib import AntennaConfig, HeatmapConfig, RadarCalib, WaveformCo
 from coloradar.capture import import_capture
 from coloradar.dataset import open_sequence
 from coloradar.dsp import RadarProcessor
-from coloradar.dsp.cfar import cfar, cfar_window, effective_train_cells, power_correlation
+from coloradar.dsp.cfar import (
+    CFARConfig,
+    cfar_window,
+    effective_train_cells,
+    power_correlation,
+    run_cfar,
+)
 from coloradar.dsp.windows import window
 
 REAL = Path(os.environ.get("COLORADAR_REAL_OPENRADAR",
@@ -84,7 +90,7 @@ def test_moving_return_found_at_its_bins_without_a_near_range_flood(real_run):
 
 def _chain_cfar(proc: RadarProcessor, power: np.ndarray, pfa: float, looks: float) -> np.ndarray:
     """The chain's CFAR (kind, guard, train, edges, excision, the windows' cell correlation) on
-    a ``(doppler, range)`` power map, through the public :func:`coloradar.dsp.cfar.cfar`."""
+    a ``(doppler, range)`` power map, through the public :func:`coloradar.dsp.cfar.run_cfar`."""
     s = proc.settings
     nd = power.shape[0]
     ns = proc.calib.waveform.num_samples
@@ -95,9 +101,10 @@ def _chain_cfar(proc: RadarProcessor, power: np.ndarray, pfa: float, looks: floa
     n_all, _ = cfar_window(s.cfar_guard, s.cfar_train, split_axis=1)
     e_all, _ = effective_train_cells(s.cfar_guard, s.cfar_train, corr, split_axis=1,
                                      wrap=(nd, None))
-    return cfar(power, "ca", s.cfar_guard, s.cfar_train, pfa, looks=looks,
-                mode=("wrap", "truncate"), split_axis=1, cell_factor=e_all / n_all,
-                excise=s.cfar_excision).detections
+    return run_cfar(power, CFARConfig("ca", s.cfar_guard, s.cfar_train, pfa, looks=looks,
+                                      mode=("wrap", "truncate"), split_axis=1,
+                                      cell_factor=e_all / n_all,
+                                      excise=s.cfar_excision)).detections
 
 
 def _far_noise(power: np.ndarray) -> np.ndarray:
@@ -133,17 +140,25 @@ def test_cfar_false_alarms_on_real_single_channel_noise_within_2x(name, pfa):
     assert 0.5 * pfa <= rate <= 2.0 * pfa, f"{name}: {rate / pfa:.2f}x the requested {pfa:g}"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "CFAR finding (docs/capture.md, 'Real frames'): the chain thresholds the sum of the 8 "
-    "channels as 8 independent looks, but on the real far-range cells the channels' powers "
-    "correlate at 0.97-0.98, so the sum is ~1 look: 3.0x the requested rate at 1e-2, 11x at "
-    "1e-3, 74x at 1e-4. Proposed fix in dsp: effective looks L/(1+(L-1)·rho) from the frame's "
-    "mean cross-channel power correlation rho (1.01 here): 1.02x at 1e-3"))
+def _chain_far_alarms(run: Path, pfa: float, looks: str) -> tuple[int, int]:
+    """False alarms of the chain's own CFAR stage (its statistic, its looks setting) on the
+    far-range noise cells of the 8-channel frame, and the number of those cells."""
+    proc, adc = _proc_and_frame(run, pfa=pfa, cfar_looks=looks)
+    stage = proc.detector.cfar
+    stat, _, num_looks, _ = stage.statistic(proc.range_doppler(adc))
+    mask, _ = stage.cfar_mask(stat, num_looks)
+    region = _far_noise(stat)
+    return int((mask & region).sum()), int(region.sum())
+
+
 @pytest.mark.parametrize("pfa", [1e-2, 1e-3])
 def test_cfar_false_alarms_on_real_eight_channel_noise_within_2x(real_run, pfa):
-    proc, adc = _proc_and_frame(real_run[0])
-    w = proc.calib.waveform
-    power = proc.range_doppler_power(adc).astype(np.float64)
-    region = _far_noise(power)
-    rate = (_chain_cfar(proc, power, pfa, looks=w.num_tx * w.num_rx) & region).sum() / region.sum()
-    assert rate <= 2.0 * pfa, f"{rate / pfa:.2f}x the requested {pfa:g}"
+    """The issue-29 finding: the 8 channels' far-range cells hold power common to all of them
+    (their powers correlate at 0.97), so their sum fluctuates like fewer looks than 8. With the
+    looks measured per frame (cfar_looks="auto") the chain stays within 2x of the requested
+    rate (measured 0.28x / 1.52x); taking the channels as 8 independent looks (the default
+    "channels") it does not (3.1x / 11x; docs/capture.md says where those cells are)."""
+    alarms, cells = _chain_far_alarms(real_run[0], pfa, "auto")
+    assert alarms <= 2.0 * pfa * cells, f"{alarms / cells / pfa:.2f}x the requested {pfa:g}"
+    alarms, cells = _chain_far_alarms(real_run[0], pfa, "channels")
+    assert alarms > 2.0 * pfa * cells, f"{alarms / cells / pfa:.2f}x the requested {pfa:g}"

@@ -30,6 +30,21 @@ the variance of ``N_eff = N² / Σ_{i,j∈T} |ρ(i−j)|²`` independent cells
 (:func:`effective_train_cells`), and CA/GO/SO thresholds use ``N_eff`` (a Gamma
 approximation of the correlated mean, exact in its first two moments). ``looks`` and
 ``num_train`` may therefore be non-integer.
+
+**Effective looks.** A sum of ``L`` channels' powers is an ``L``-look Gamma only where the
+channels' noise is independent. Where the cells' power is partly common to all channels —
+clutter and phase-noise skirts of strong returns reach every channel through the same
+scatterers and the shared LO, so their level varies from cell to cell alike in all channels
+(compound-Gaussian clutter: speckle times a texture) — the sum fluctuates more: with a mean
+cross-channel power correlation ``ρ̄`` its variance is that of ``L/(1 + (L − 1)ρ̄)``
+independent looks. :func:`effective_looks` measures the looks from the map itself, by the
+method of moments (a Gamma matched in its first two moments, as Welch–Satterthwaite) on the
+ratio of every cell to its CA noise estimate: the ratio is scale-free, so a noise floor that
+changes with range does not count as texture, and cells far above any threshold of ``1 … L``
+looks (returns) are left out. Where the excess comes from one component common to every
+channel, the sum is ``λ₁E₁ + λ₂·Gamma(L − 1)`` (the channels' covariance's eigenvalues), whose
+common look carries the tail: the looks are then lowered to match that tail at the requested
+false-alarm probability.
 """
 
 from __future__ import annotations
@@ -55,6 +70,7 @@ __all__ = [
     "cfar",
     "cfar_scale",
     "cfar_window",
+    "effective_looks",
     "effective_train_cells",
     "false_alarm_rate",
     "power_correlation",
@@ -182,6 +198,93 @@ def effective_train_cells(guard: tuple[int, ...], train: tuple[int, ...],
         return float(len(o) ** 2 / c.sum()) if len(o) else 0.0
 
     return n_eff(~inner), n_eff(~inner & (offs[:, ax] < 0))
+
+
+def effective_looks(ratio: np.ndarray, num_train: float, max_looks: float,
+                    pfa: float | None = None, trim_pfa: float = 1e-6) -> float:
+    """Looks of a Gamma that matches the first two moments of noise cells' CFAR ratios (and,
+    with ``pfa``, the tail of a sum with one common look at that probability).
+
+    For cells of ``k``-look Gamma noise divided by a CA estimate with the variance of
+    ``num_train`` independent cells (``Z ~ Gamma(n·k)/(n·k)``, independent of the cell),
+    ``y = X/Z`` has ``E[y²]/E[y]² = (1 + 1/k)·(nk − 1)/(nk − 2)``; solved for ``k`` with the
+    sample moments. Cells above the one-look CA threshold at ``trim_pfa`` are returns under any
+    number of looks in ``[1, max_looks]`` and are left out (for noise of ``max_looks``
+    independent looks that removes far fewer than ``trim_pfa`` of the cells: no bias).
+
+    Parameters
+    ----------
+    ratio
+        float ``(...)``: cell power over its CA noise estimate (non-finite values are skipped).
+    num_train
+        Independent-cell equivalent ``N_eff`` of the CA training set.
+    max_looks
+        Channels summed (the independent-noise looks): the upper bound.
+    pfa
+        Where given, the looks are lowered to those whose Gamma has the tail, at ``pfa``, of the
+        sum that has the measured variance when its excess comes from one component common
+        to every channel (amplitude correlation ``ρ``): ``λ₁E₁ + λ₂·Gamma(L − 1)`` with
+        ``λ₁ = 1 + (L − 1)ρ``, ``λ₂ = 1 − ρ`` (the channels' covariance's eigenvalues). The
+        common look carries that sum's tail, which a Gamma of the same variance under-states.
+    trim_pfa
+        False-alarm probability of the one-look threshold above which cells are left out.
+
+    Returns
+    -------
+    float
+        The looks, in ``[1, max_looks]``; ``max_looks`` with fewer than 100 cells.
+    """
+    n, top = float(num_train), float(max_looks)
+    y = np.asarray(ratio, dtype=np.float64).ravel()
+    trim = stats.f.isf(trim_pfa, 2.0, 2.0 * n)
+    y = y[np.isfinite(y) & (y >= 0) & (y < trim)]
+    if y.size < 100 or top <= 1.0:
+        return max(top, 1.0)
+    m1 = y.mean()
+    if not m1 > 0:
+        return top
+    r = float(np.mean(np.square(y / m1)))
+
+    def excess(k: float) -> float:              # model minus measured normalised 2nd moment
+        return (1.0 + 1.0 / k) * (n * k - 1.0) / (n * k - 2.0) - r
+
+    lo = max(1.0, 2.5 / n)
+    if excess(top) >= 0:
+        return top
+    if excess(lo) <= 0:
+        return lo
+    k = float(optimize.brentq(excess, lo, top, xtol=1e-6))
+    return k if pfa is None else _tail_looks(k, top, pfa)
+
+
+def _tail_looks(k: float, L: float, pfa: float) -> float:
+    """Looks ``≤ k`` whose Gamma (mean ``L``) exceeds the same level at ``pfa`` as the sum of
+    ``L`` channels with a common component whose variance is that of ``k`` looks."""
+    if k >= L or L < 2:
+        return k
+    rho = np.sqrt((L / k - 1.0) / (L - 1.0))         # k = L/(1 + (L − 1)ρ²)
+    l1, l2, m = 1.0 + (L - 1.0) * rho, 1.0 - rho, L - 1.0
+
+    def log_sf(t: float) -> float:       # P(λ₁E₁ + λ₂G(m) > t), both terms positive
+        a = special.gammaincc(m, t / l2) if l2 > 0 else 0.0
+        x = t * (1.0 / l2 - 1.0 / l1) if l2 > 0 else np.inf
+        p_m = special.gammainc(m, x)
+        b = np.exp(-t / l1 - m * np.log1p(-l2 / l1) + np.log(p_m)) if p_m > 0 else 0.0
+        return float(np.log(a + b))
+
+    hi = L
+    while log_sf(hi) > np.log(pfa):
+        hi *= 2.0
+    t = optimize.brentq(lambda v: log_sf(v) - np.log(pfa), 0.0, hi, xtol=1e-9 * hi)
+
+    def gap(kk: float) -> float:          # Gamma(kk) of mean L over the level, log
+        return float(np.log(special.gammaincc(kk, kk * t / L)) - np.log(pfa))
+
+    if gap(k) >= 0:
+        return k
+    if gap(1.0) <= 0:
+        return 1.0
+    return float(optimize.brentq(gap, 1.0, k, xtol=1e-6))
 
 
 def _os_rank(rank: float | int, n: int) -> int:
@@ -455,6 +558,11 @@ def run_cfar(power: np.ndarray, config: CFARConfig) -> CFARResult:
         lead = _ring_sum(x, g, h, modes, -1, ax) / np.maximum(c_lead, 1.0)
         lag = _ring_sum(x, g, h, modes, 1, ax) / np.maximum(c_lag, 1.0)
         noise = np.maximum(lead, lag) if kind == "go" else np.minimum(lead, lag)
+        if truncate:
+            # A cell whose half lies wholly beyond the edge (the last range bin) has only the
+            # other: CA of that half (α to match, _truncated_alpha); an empty half's zero mean
+            # would otherwise make SO fire on every such cell.
+            noise = np.where(c_lag == 0, lead, np.where(c_lead == 0, lag, noise))
         # Unequal halves at an edge: the threshold of the smaller one (conservative for GO).
         alpha = (_truncated_alpha(kind, x.shape, g, h, modes, ax, cell_factor, pfa, looks)
                  if truncate else _alpha_for(kind, float(n_half), cell_factor, pfa, 0, looks))
@@ -496,10 +604,15 @@ def _truncated_alpha(kind: str, shape: tuple[int, ...], g: tuple[int, ...], h: t
     edges (read-only, cached)."""
     if kind == "ca":
         count = _truncated_counts(shape, g, h, modes, 0, 0)
+        out = np.asarray(_alpha_for(kind, count, factor, pfa, 0, looks))
     else:
-        count = np.minimum(_truncated_counts(shape, g, h, modes, -1, axis),
-                           _truncated_counts(shape, g, h, modes, 1, axis))
-    out = np.asarray(_alpha_for(kind, count, factor, pfa, 0, looks))
+        lead = _truncated_counts(shape, g, h, modes, -1, axis)
+        lag = _truncated_counts(shape, g, h, modes, 1, axis)
+        one_sided = (lead == 0) | (lag == 0)
+        out = np.asarray(_alpha_for(kind, np.minimum(lead, lag), factor, pfa, 0, looks))
+        if one_sided.any():
+            ca = np.asarray(_alpha_for("ca", np.maximum(lead, lag), factor, pfa, 0, looks))
+            out = np.where(one_sided, ca, out)
     out.setflags(write=False)
     return out
 
@@ -511,6 +624,8 @@ def _alpha_for(kind: str, count: float | np.ndarray, factor: float, pfa: float, 
         return cfar_scale(kind, float(count) * factor, pfa, rank=rank, looks=looks)
     counts = np.rint(count).astype(np.int64)
     values, inverse = np.unique(counts, return_inverse=True)
-    table = np.array([cfar_scale(kind, max(float(v), 1.0) * factor, pfa, rank=rank, looks=looks)
+    # (an edge cell's empty GO/SO half counts as one cell: a factor < 1 must not take it
+    # below the one cell cfar_scale needs)
+    table = np.array([cfar_scale(kind, max(float(v) * factor, 1.0), pfa, rank=rank, looks=looks)
                       for v in values])
     return table[inverse].reshape(counts.shape)

@@ -17,9 +17,10 @@ from .cfar import CFAR_KINDS, CFARKind
 from .heatmap import ENGINES
 from .windows import WINDOWS, WindowName
 
-__all__ = ["ANGLE_METHODS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AliasSettings", "AngleMethod",
-           "AngleSettings", "ArraySettings", "CFARSettings", "CouplingDomain", "CubeSettings",
-           "GuardSettings", "NoiseWeighting", "PointSettings", "ProcessingSettings"]
+__all__ = ["ANGLE_METHODS", "CFAR_LOOKS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AliasSettings",
+           "AngleMethod", "AngleSettings", "ArraySettings", "CFARLooks", "CFARSettings",
+           "CouplingDomain", "CubeSettings", "GuardSettings", "NoiseWeighting", "PointSettings",
+           "ProcessingSettings"]
 
 CouplingDomain = Literal["raw", "calibrated"]
 """What the coupling file is the range FFT of: uncalibrated or calibrated samples."""
@@ -30,6 +31,9 @@ ANGLE_METHODS: tuple[AngleMethod, ...] = get_args(AngleMethod)
 NoiseWeighting = Literal["whiten", "off"]
 """How channels are summed for detection (:attr:`ProcessingSettings.noise_weighting`)."""
 NOISE_WEIGHTINGS: tuple[NoiseWeighting, ...] = get_args(NoiseWeighting)
+CFARLooks = Literal["auto", "channels"]
+"""Looks the CFAR threshold assumes (:attr:`ProcessingSettings.cfar_looks`)."""
+CFAR_LOOKS: tuple[CFARLooks, ...] = get_args(CFARLooks)
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,15 @@ class CFARSettings:
         ``min_range``), so that noise in the sum is a proper Ntx·Nrx-look chi-square whatever
         the channel gains and calibration; ``"off"``: plain sum, all channels assumed
         equally noisy (the chain before issue 10; false alarms grow with the gain spread).
+    cfar_looks
+        Looks of the summed power the threshold is computed for. ``"channels"`` (default):
+        Ntx·Nrx, exact for independent receiver noise; scene content the channels share
+        (clutter, phase-noise skirts, weak returns) then crosses it more often than ``pfa``
+        (OpenRadar's real frame: 11x at 1e-3 on its far-range cells, docs/capture.md).
+        ``"auto"``: measured in every frame (:func:`coloradar.dsp.cfar.effective_looks`,
+        between 1 and Ntx·Nrx): holds ``pfa`` within 2x on that frame and on common-mode
+        noise, and comes out as Ntx·Nrx on independent noise, but treats dense weak returns
+        as noise too (the demo's corridor: a third to two thirds fewer points, docs/dsp.md).
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping
@@ -144,6 +157,7 @@ class CFARSettings:
     cfar_rank: float = 0.75
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
+    cfar_looks: CFARLooks = "channels"
     min_range: float = 0.3
     peak_grouping: bool = True
 
@@ -304,6 +318,7 @@ class ProcessingSettings:
     cfar_rank: float = 0.75
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
+    cfar_looks: CFARLooks = "channels"
     doppler_unwrap: float = 10.0
     alias_margin_db: float = 0.0
     heatmap_unwrap: bool = False
@@ -327,7 +342,7 @@ class ProcessingSettings:
         choices = {"range_window": WINDOWS, "doppler_window": WINDOWS,
                    "coupling_domain": COUPLING_DOMAINS, "overlap": OVERLAP_MODES,
                    "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
-                   "noise_weighting": NOISE_WEIGHTINGS,
+                   "noise_weighting": NOISE_WEIGHTINGS, "cfar_looks": CFAR_LOOKS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1), "engine": ENGINES}
         choices["near_field"] = (True, False, "auto")
         for name, allowed in choices.items():

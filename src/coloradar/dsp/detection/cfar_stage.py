@@ -18,6 +18,7 @@ from ..cfar import (
     CFARConfig,
     CFAREdge,
     cfar_window,
+    effective_looks,
     effective_train_cells,
     power_correlation,
     run_cfar,
@@ -91,7 +92,8 @@ class CFARStage:
         ntx, nrx, nc, ns = w.frame_shape
         nd = cube.doppler_fft_size
         # The map sums ntx·nrx channels of independent noise: that many exponential looks
-        # (with "whiten"; "looks" replaces it per frame by the effective number).
+        # (with "whiten"); cfar_looks="auto" measures fewer where the cells' power is common
+        # to the channels (clutter, phase noise).
         self.looks = ntx * nrx
         # Windowed FFT bins are correlated: the training mean counts as fewer independent
         # cells (cfar.effective_train_cells).
@@ -104,6 +106,10 @@ class CFARStage:
                                               wrap=(nd, None))
         self.cell_factor = {"ca": e_all / n_all, "go": e_half / n_half,
                             "so": e_half / n_half, "os": 1.0}[s.cfar_kind]
+        # The CA training set's independent-cell equivalent: the looks are measured on the
+        # ratio of every cell to its CA estimate, whatever the CFAR kind (cfar.effective_looks).
+        self.ca_factor, self.ca_train = e_all / n_all, e_all
+        self.first_range = int(np.ceil(s.min_range / cube.range_bin_width))
         # Range bins notched by DC removal: the window's half-width in bins, zero padding
         # included (periodic Hann: 3 taps, Blackman: 5).
         taps = {"none": 0, "hann": 1, "blackman": 2}[cs.range_window]
@@ -197,9 +203,31 @@ class CFARStage:
             out[nd // 2] = weighted[keep, nd // 2].sum() * (weighted.shape[0] / keep.sum())
         return out
 
-    def cfar_mask(self, stat: np.ndarray, looks: int) -> tuple[np.ndarray, np.ndarray]:
+    def cfar_mask(self, stat: np.ndarray, looks: float) -> tuple[np.ndarray, np.ndarray]:
         """CFAR on the detection statistic: bool mask and noise estimate, ``(doppler, range)``
-        (cells the CFAR does not test: False and +inf)."""
+        (cells the CFAR does not test: False and +inf); ``looks`` the channels summed, replaced
+        with ``cfar_looks="auto"`` by those measured on the map (:meth:`measured_looks`)."""
+        s = self.settings
+        if s.cfar_looks == "auto":
+            looks = self.measured_looks(stat, looks)
+        return self._run(stat, looks)
+
+    def measured_looks(self, stat: np.ndarray, looks: float) -> float:
+        """Effective looks of the statistic ``(doppler, range)``: moments of the cells beyond
+        ``min_range`` over their CA noise estimate (:func:`~coloradar.dsp.cfar.effective_looks`;
+        the CA pass assumes ``looks``, which only decides which cells its excision replaces)."""
+        s = self.settings
+        cmodes: tuple[CFAREdge, CFAREdge] = ("wrap", "truncate")
+        r0 = max(0, min(max(self.notch_bins, self.first_range),
+                        stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
+        res = run_cfar(stat[:, r0:], CFARConfig("ca", s.cfar_guard, s.cfar_train, s.pfa,
+                                                s.cfar_rank, looks, cmodes, 1, self.ca_factor,
+                                                s.cfar_excision))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = stat[:, r0:] / res.noise
+        return effective_looks(ratio, self.ca_train, looks, pfa=s.pfa)
+
+    def _run(self, stat: np.ndarray, looks: float) -> tuple[np.ndarray, np.ndarray]:
         s = self.settings
         # Range edges: training cells beyond the map are left out ("truncate"), not mirrored
         # (mirrored copies made the edge cells fire ~5x too often). OS needs a full window.
