@@ -204,7 +204,8 @@ class RioResult:
         float64 ``(M,)``: the radar stamps of those frames [s].
     covariance
         float64 ``(M, 6, 6)``: covariance of the base position [m²] and attitude (world-frame
-        rotation vector) [rad²], in the output's world frame.
+        rotation vector) [rad²], in the output's world frame; it includes the tilt error
+        of the anchoring first pose, which the re-anchoring imposes on every pose.
     velocity
         float64 ``(M, 3)``: the IMU's velocity, output world frame [m/s].
     accel_bias, gyro_bias
@@ -224,7 +225,8 @@ class RioResult:
         ``point_updates`` (frames updated point by point), ``points`` and ``points_used``
         (points offered to and passed by the per-point gate).
     velocity_covariance
-        float64 ``(M, 3, 3)``: covariance of ``velocity`` [m²/s²], output world frame.
+        float64 ``(M, 3, 3)``: covariance of ``velocity`` [m²/s²], output world frame
+        (the anchoring's tilt error included, as for ``covariance``).
     static_points
         Per output pose, bool over the rows of the first radar's cloud: the points the
         per-point gate took as static (None where the frame had no point update, or the
