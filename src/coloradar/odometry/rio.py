@@ -62,7 +62,13 @@ class RioConfig:
     The IMU defaults are the MicroStrain 3DM-GX5-25 datasheet's (MicroStrain/LORD, "3DM-GX5-25
     Attitude and Heading Reference System", 8400-0093): noise densities 100 µg/√Hz and
     0.005 °/s/√Hz, initial bias ±0.002 g and ±0.04 °/s, bias instability 0.04 mg and 8 °/h
-    (turned into random walks as instability / √(100 s)).
+    (turned into random walks as instability / √(100 s)). The regime the filter must survive
+    (issue 25) has turn-on biases up to twice the datasheet's and walks up to ten times the
+    derived densities. Assuming twice the turn-on biases and five times the walks (chosen on
+    the tuning seeds of ``benchmarks/mc_odometry.py``) makes the attitude NEES consistent and
+    the median end better, but the worst runs without a rest worse (the heading follows a
+    barely observable vertical gyro bias that a faster walk lets wander), on the reported
+    seeds: the datasheet's figures stay the default (docs/odometry.md, "Monte Carlo").
 
     Attributes
     ----------
@@ -198,7 +204,8 @@ class RioResult:
         float64 ``(M,)``: the radar stamps of those frames [s].
     covariance
         float64 ``(M, 6, 6)``: covariance of the base position [m²] and attitude (world-frame
-        rotation vector) [rad²], in the output's world frame.
+        rotation vector) [rad²], in the output's world frame; it includes the tilt error
+        of the anchoring first pose, which the re-anchoring imposes on every pose.
     velocity
         float64 ``(M, 3)``: the IMU's velocity, output world frame [m/s].
     accel_bias, gyro_bias
@@ -218,7 +225,8 @@ class RioResult:
         ``point_updates`` (frames updated point by point), ``points`` and ``points_used``
         (points offered to and passed by the per-point gate).
     velocity_covariance
-        float64 ``(M, 3, 3)``: covariance of ``velocity`` [m²/s²], output world frame.
+        float64 ``(M, 3, 3)``: covariance of ``velocity`` [m²/s²], output world frame
+        (the anchoring's tilt error included, as for ``covariance``).
     static_points
         Per output pose, bool over the rows of the first radar's cloud: the points the
         per-point gate took as static (None where the frame had no point update, or the
@@ -690,6 +698,45 @@ def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndar
     return out
 
 
+def _anchor_covariance(c: int, pos: np.ndarray, vel: np.ndarray, cov: np.ndarray,
+                       vcov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The output's pose and velocity covariances with the anchor's tilt error added.
+
+    The output is rotated so that its first pose lies on the initial pose, and that first
+    attitude is the filter's at pose ``c`` carried back (:func:`_smoothed_start`): its tilt
+    error ``δθ₀`` (world x, y; the filter's own estimate at ``c``) is imposed on every pose.
+    To first order pose ``i`` then errs by ``δθ₀`` in attitude, ``δθ₀ × (p_i − p_0)`` in
+    position and ``δθ₀ × v_i`` in velocity on top of the filter's own error (the tilt is
+    observable, so the filter's later tilt error soon decorrelates from ``δθ₀``; its yaw
+    error does not, and already includes the anchor's, so yaw is left out).
+
+    Parameters
+    ----------
+    c
+        Index of the anchoring pose.
+    pos, vel
+        float64 ``(M, 3)``: positions [m] and velocities [m/s], filter world frame.
+    cov, vcov
+        float64 ``(M, 6, 6)`` (position, attitude) and ``(M, 3, 3)``, filter world frame.
+
+    Returns
+    -------
+    cov, vcov
+        The same shapes, with the anchor's tilt error added.
+    """
+    p_tilt = cov[c, 3:, 3:].copy()
+    p_tilt[2, :] = 0.0
+    p_tilt[:, 2] = 0.0
+    m = len(pos)
+    g = np.zeros((m, 6, 3))
+    g[:, :3] = -skew(pos - pos[0])
+    g[:, 3:] = np.eye(3)
+    sv = skew(vel)
+    cov = cov + g @ p_tilt @ g.transpose(0, 2, 1)
+    vcov = vcov + sv @ p_tilt @ sv.transpose(0, 2, 1)
+    return cov, vcov
+
+
 def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
             groundtruth: Trajectory | None) -> RioResult:
     """The loop's poses re-anchored at the initial pose, as a :class:`RioResult`."""
@@ -714,6 +761,8 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
     a_t = initial_pose.translation - a_rot.apply(pos_base[0])
     traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
                       f"{s.names[0]} radar-inertial EKF")
+    c = min(int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay)), len(out_t) - 1)
+    out_cov, out_vcov = _anchor_covariance(c, pos_base, out_v, out_cov, lp.out_vcov[done])
     am = a_rot.as_matrix()
     big = np.zeros((6, 6))
     big[:3, :3] = big[3:, 3:] = am
@@ -722,7 +771,7 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
     return RioResult(traj, prim.timestamps[lp.k0:][done].copy(), big @ out_cov @ big.T,
                      a_rot.apply(out_v), out_b[:, 0], out_b[:, 1], out_b[:, 2], out_b[:, 3],
                      out_td[:, 0], out_td[:, 1], phi, s.names, s.static[0][lp.k0:][done],
-                     lp.stats, am @ lp.out_vcov[done] @ am.T, masks)
+                     lp.stats, am @ out_vcov @ am.T, masks)
 
 
 def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
