@@ -154,6 +154,7 @@ def test_swapped_arguments_name_the_input_and_never_suggest_overwrite(root, tmp_
 
 # -- 6: atomic writes get the mode of a plain open ------------------------------------------------
 def test_atomic_outputs_get_the_mode_a_plain_open_gives(root, tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")      # the .rrd writer lives in coloradar.viz
     from coloradar.formats.atomic import atomic_output
 
     with atomic_output(tmp_path / "a.bin") as tmp:

@@ -44,8 +44,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..viz import animate_run
-
     check_input(args.run)
     if Path(args.out).suffix.lower() not in (".mp4", ".gif", ".rrd"):
         raise UsageError(f"--out {args.out}: expected a .mp4, .gif or .rrd file")
@@ -59,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"{out}: {seq.name} from {args.start:g} s (open with: rerun {out})")
         return 0
+    from ..viz import animate_run  # matplotlib: after the arguments are known to be right
+
     animate_run(seq, out, start=args.start, duration=args.duration, fps=args.fps,
                 frame=args.coords, view=args.view, extent=args.extent, dpi=args.dpi,
                 overwrite=args.overwrite, progress=Progress(0, "pictures", enabled=not args.quiet))
