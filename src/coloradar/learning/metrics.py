@@ -3,19 +3,8 @@
 The point-set distances are those of :mod:`coloradar.geometry.cloud_metrics` (one
 implementation, re-exported here); this module adds the per-frame scores of a learning output.
 
-Point sets are compared on x y z (metres, one frame for both). With ``d(p, Q)`` the distance
-from ``p`` to the nearest point of ``Q`` (a :class:`scipy.spatial.cKDTree` query):
-
-* **Chamfer distance** ``mean_{p∈P} d(p, T) + mean_{t∈T} d(t, P)`` (the sum of the two mean
-  nearest-neighbour distances; ``squared=True`` averages squared distances instead, as many
-  point-cloud up-sampling papers report it).
-* **Modified Hausdorff distance** ``max(mean_{p∈P} d(p, T), mean_{t∈T} d(t, P))`` (Dubuisson
-  and Jain, "A modified Hausdorff distance for object matching", ICPR 1994).
-* **F-score** at a threshold τ (Knapitsch et al., "Tanks and Temples", SIGGRAPH 2017):
-  precision = share of predicted points within τ of the target, recall = share of target
-  points within τ of the prediction, F = 2PR/(P + R).
-* **Occupancy IoU / precision / recall** of two boolean BEV images (optionally only over the
-  cells where the radar can see).
+The definitions (Chamfer, modified Hausdorff, F-score, occupancy IoU / precision / recall) and
+their references are in that module's docstring.
 
 Empty sets: a distance to an empty set is ``inf``; a ratio with a zero denominator is ``nan``
 (F is 0 when precision and recall are both 0 or one of them is undefined for an empty set
