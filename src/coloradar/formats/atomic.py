@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import re
-import tempfile
+import secrets
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -43,32 +43,20 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes | memoryview) -
     content or all of ``data``. The temporary name starts with ``.`` and ends with ``.tmp`` so
     that an interrupted write is recognisable and ignored by readers.
     """
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise _write_error(path, exc) from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, default_file_mode())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        if isinstance(exc, OSError) and not isinstance(exc, ColoradarError):
-            raise _write_error(path, exc) from None
-        raise
+    with atomic_output(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+
+
+def _temporary_name(path: Path, suffix: str) -> Path:
+    """``.<name>.<random>.tmp<suffix>`` beside ``path`` (a name only: the caller creates it)."""
+    return path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp{suffix}"
 
 
 @contextmanager
 def atomic_output(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Path]:
     """A temporary path beside ``path`` for a writer that needs a file name (HDF5, a video, a
     Rerun recording), renamed to ``path`` when the block ends without an exception; removed
-    otherwise (Ctrl-C included).
+    otherwise (Ctrl-C included, also one pressed while the temporary file is being made).
 
     The file gets the mode a plain ``open`` would give (:func:`default_file_mode`), not
     ``mkstemp``'s 0o600. The temporary name is ``.<name>.<random>.tmp<suffix>``, recognised by
@@ -80,20 +68,27 @@ def atomic_output(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
         The folder cannot be created, or the file cannot be written or renamed.
     """
     path = Path(path)
+    tmp: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}",
-                                    dir=path.parent)
-        os.close(fd)
-    except OSError as exc:
-        raise _write_error(path, exc) from None
-    tmp = Path(name)
-    try:
+        for _ in range(100):
+            # Named before it is created, so that a Ctrl-C landing anywhere in between still
+            # leaves a name to remove (with mkstemp the name is lost if it lands in its return).
+            tmp = _temporary_name(path, suffix)
+            try:
+                os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+                break
+            except FileExistsError:
+                tmp = None              # someone else's: never ours to remove
+                continue
+        else:
+            raise FileExistsError(f"no free temporary name beside {path}")
         yield tmp
         os.chmod(tmp, default_file_mode())
         os.replace(tmp, path)
     except BaseException as exc:
-        tmp.unlink(missing_ok=True)
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)
         if isinstance(exc, OSError) and not isinstance(exc, ColoradarError):
             raise _write_error(path, exc) from None
         raise
