@@ -36,7 +36,7 @@ from ..geometry.mapping import voxel_downsample
 from .imu import GX5_25, simulate_imu
 from .lidar import LidarModel, simulate_scan
 from .paths import EllipsePath
-from .radar import RADAR_MODELS, onboard_pointcloud, visible_targets
+from .radar import RADAR_MODELS, coherent_snr, onboard_pointcloud, visible_targets
 from .rest import RestStart
 from .run import DEFAULT_START_TIME, RATES, resolve_scene, simulated_calibration
 from .scene import Scene
@@ -141,8 +141,7 @@ def array_pointcloud(calib, model, targets, rng: np.random.Generator) -> np.ndar
         return np.zeros((0, 5), dtype=np.float32)
     pos = targets.position
     r = targets.range
-    nc, nv = w.num_chirps, w.num_tx * w.num_rx
-    snr_k = targets.received_amplitude**2 * w.num_samples * nc * nv / (2.0 * model.noise_std**2)
+    snr_k = coherent_snr(calib, model, targets)
     vpos = calib.antenna.virtual.unique_positions
     n_az = max(2, len(np.unique(vpos[:, 0])))
     n_el = max(2, len(np.unique(vpos[:, 1])))

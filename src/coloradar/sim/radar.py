@@ -322,6 +322,15 @@ def radar_frame(calib: RadarCalib, model: RadarModel, targets: RadarTargets, *,
     return frame
 
 
+def coherent_snr(calib: RadarCalib, model: RadarModel, targets: RadarTargets) -> np.ndarray:
+    """float64 ``(N,)``: each scatterer's SNR after the range, Doppler and virtual-array
+    sums, ``|A|²·Ns·Nc·Nv/(2σ²)`` (linear, not dB)."""
+    w = calib.waveform
+    nv = w.num_tx * w.num_rx
+    return (targets.received_amplitude**2 * w.num_samples * w.num_chirps * nv
+            / (2.0 * model.noise_std**2))
+
+
 def onboard_pointcloud(calib: RadarCalib, model: RadarModel, targets: RadarTargets,
                        rng: np.random.Generator) -> np.ndarray:
     """What a TI single-chip radar's on-board detector reports for ``targets``.
@@ -348,10 +357,10 @@ def onboard_pointcloud(calib: RadarCalib, model: RadarModel, targets: RadarTarge
     if len(targets) == 0:
         return np.zeros((0, 5), dtype=np.float32)
     r = targets.range
-    nc, nv = w.num_chirps, w.num_tx * w.num_rx
+    nc = w.num_chirps
     rbin = np.rint(r / w.range_bin_width).astype(np.int64)
     dbin = np.mod(np.rint(targets.range_rate / w.velocity_bin_width).astype(np.int64), nc)
-    snr_k = targets.received_amplitude**2 * w.num_samples * nc * nv / (2.0 * model.noise_std**2)
+    snr_k = coherent_snr(calib, model, targets)
     nr = w.num_samples
     keep = rbin < nr
     snr_map = np.zeros((nr, nc))
