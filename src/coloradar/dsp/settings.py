@@ -134,12 +134,11 @@ class CFARSettings:
     cfar_looks
         Looks of the summed power the threshold is computed for. ``"channels"`` (default):
         Ntx·Nrx, exact for independent receiver noise; scene content the channels share
-        (clutter, phase-noise skirts, weak returns) then crosses it more often than ``pfa``
-        (OpenRadar's real frame: 11x at 1e-3 on its far-range cells, docs/capture.md).
+        (clutter, phase-noise skirts, weak returns) then crosses it more often than ``pfa``.
         ``"auto"``: measured in every frame (:func:`coloradar.dsp.cfar.effective_looks`,
-        between 1 and Ntx·Nrx): holds ``pfa`` within 2x on that frame and on common-mode
-        noise, and comes out as Ntx·Nrx on independent noise, but treats dense weak returns
-        as noise too (the demo's corridor: a third to two thirds fewer points, docs/dsp.md).
+        between 1 and Ntx·Nrx): holds ``pfa`` within 2x on planted common-mode noise and
+        comes out as Ntx·Nrx on independent noise, but treats dense weak returns as noise
+        too (the demo's corridor: a third to two thirds fewer points, docs/dsp.md).
     cfar_range_floor
         Flatten the noise floor along range before the CFAR: every range bin's statistic is
         divided by its floor (the lower quartile over Doppler, pooled with the two neighbouring
