@@ -18,14 +18,6 @@ from coloradar.calib import AntennaConfig, HeatmapConfig, RadarCalib, WaveformCo
 from coloradar.capture import import_capture
 from coloradar.dataset import open_sequence
 from coloradar.dsp import RadarProcessor
-from coloradar.dsp.cfar import (
-    CFARConfig,
-    cfar_window,
-    effective_train_cells,
-    power_correlation,
-    run_cfar,
-)
-from coloradar.dsp.windows import window
 
 REAL = Path(os.environ.get("COLORADAR_REAL_OPENRADAR",
                            Path(__file__).resolve().parents[1].parent / "shared" / "real" / "openradar"))
@@ -88,33 +80,26 @@ def test_moving_return_found_at_its_bins_without_a_near_range_flood(real_run):
     assert np.all(np.isfinite(pts)) and len(pts) == len(det)
 
 
-def _chain_cfar(proc: RadarProcessor, power: np.ndarray, pfa: float, looks: float) -> np.ndarray:
-    """The chain's CFAR (kind, guard, train, edges, excision, the windows' cell correlation) on
-    a ``(doppler, range)`` power map, through the public :func:`coloradar.dsp.cfar.run_cfar`."""
-    s = proc.settings
-    nd = power.shape[0]
-    ns = proc.calib.waveform.num_samples
-    h = [g + t for g, t in zip(s.cfar_guard, s.cfar_train, strict=True)]
-    corr = (power_correlation(window(s.doppler_window, proc.calib.waveform.num_chirps), nd,
-                              2 * h[0]),
-            power_correlation(window(s.range_window, ns), proc.range_fft_size, 2 * h[1]))
-    n_all, _ = cfar_window(s.cfar_guard, s.cfar_train, split_axis=1)
-    e_all, _ = effective_train_cells(s.cfar_guard, s.cfar_train, corr, split_axis=1,
-                                     wrap=(nd, None))
-    return run_cfar(power, CFARConfig("ca", s.cfar_guard, s.cfar_train, pfa, looks=looks,
-                                      mode=("wrap", "truncate"), split_axis=1,
-                                      cell_factor=e_all / n_all,
-                                      excise=s.cfar_excision)).detections
-
-
-def _far_noise(power: np.ndarray) -> np.ndarray:
-    """The far-range cells (second half of the range bins) off the static returns' zero-Doppler
-    bins (|Doppler bin| > 2)."""
-    nd, nr = power.shape
-    region = np.zeros(power.shape, dtype=bool)
-    region[:, nr // 2:] = True
-    region[np.abs(np.arange(nd) - nd // 2) <= 2] = False
+def _far_noise(shape: tuple[int, int]) -> np.ndarray:
+    """The far-range noise cells of a ``(doppler, range)`` map: range bins from 84 (the
+    8-channel frame's moving return at bin 60 and its echoes reach bin 83: their alarms there
+    are coherent over the channels, as one direction's return, see
+    ``test_alarms_left_out_of_the_noise_are_returns``) and Doppler bins 16 or more from zero
+    (the frames' moving things lie within 13 bins of zero; there the far-range floor of the
+    8-channel frame is 1.5–2.5 dB up)."""
+    nd = shape[0]
+    region = np.zeros(shape, dtype=bool)
+    region[:, 84:] = True
+    region[np.abs(np.arange(nd) - nd // 2) < 16] = False
     return region
+
+
+def _stage_alarms(proc: RadarProcessor, adc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The chain's own CFAR stage on a frame: its detection statistic and its mask (before
+    peak grouping), both ``(doppler, range)``."""
+    stage = proc.detector.cfar
+    stat, _, looks, _ = stage.statistic(proc.range_doppler(adc))
+    return stat, stage.cfar_mask(stat, looks)[0]
 
 
 def _single_channel(name: str) -> tuple[RadarProcessor, np.ndarray]:
@@ -131,34 +116,62 @@ def _single_channel(name: str) -> tuple[RadarProcessor, np.ndarray]:
 @pytest.mark.parametrize("name", ["doppler_example.npy", "simple_frame_1.npy"])
 @pytest.mark.parametrize("pfa", [1e-2, 1e-3])
 def test_cfar_false_alarms_on_real_single_channel_noise_within_2x(name, pfa):
-    """One channel (one look): the chain's CFAR on the far-range cells of a real frame fires
-    within a factor 2 of the requested rate (measured: 1.19x / 0.83x and 1.45x / 1.78x)."""
+    """One channel (one look): the chain's CFAR on the far-range noise of a real frame fires
+    within a factor 2 of the requested rate (measured: 1.18x / 0.84x and 1.10x / 1.64x)."""
     proc, adc = _single_channel(name)
-    power = proc.range_doppler_power(adc).astype(np.float64)
-    region = _far_noise(power)
-    rate = (_chain_cfar(proc, power, pfa, looks=1) & region).sum() / region.sum()
+    stat, mask = _stage_alarms(RadarProcessor(proc.calib, pfa=pfa), adc)
+    region = _far_noise(stat.shape)
+    rate = (mask & region).sum() / region.sum()
     assert 0.5 * pfa <= rate <= 2.0 * pfa, f"{name}: {rate / pfa:.2f}x the requested {pfa:g}"
 
 
-def _chain_far_alarms(run: Path, pfa: float, looks: str) -> tuple[int, int]:
-    """False alarms of the chain's own CFAR stage (its statistic, its looks setting) on the
-    far-range noise cells of the 8-channel frame, and the number of those cells."""
-    proc, adc = _proc_and_frame(run, pfa=pfa, cfar_looks=looks)
-    stage = proc.detector.cfar
-    stat, _, num_looks, _ = stage.statistic(proc.range_doppler(adc))
-    mask, _ = stage.cfar_mask(stat, num_looks)
-    region = _far_noise(stat)
-    return int((mask & region).sum()), int(region.sum())
+def _eight_channel_rate(run: Path, pfa: float, **settings) -> float:
+    """The chain's false-alarm rate on the 8-channel frame's far-range noise, over ``pfa``."""
+    proc, adc = _proc_and_frame(run, pfa=pfa, **settings)
+    stat, mask = _stage_alarms(proc, adc)
+    region = _far_noise(stat.shape)
+    return float((mask & region).sum() / region.sum() / pfa)
 
 
 @pytest.mark.parametrize("pfa", [1e-2, 1e-3])
 def test_cfar_false_alarms_on_real_eight_channel_noise_within_2x(real_run, pfa):
-    """The issue-29 finding: the 8 channels' far-range cells hold power common to all of them
-    (their powers correlate at 0.97), so their sum fluctuates like fewer looks than 8. With the
-    looks measured per frame (cfar_looks="auto") the chain stays within 2x of the requested
-    rate (measured 0.28x / 1.52x); taking the channels as 8 independent looks (the default
-    "channels") it does not (3.1x / 11x; docs/capture.md says where those cells are)."""
-    alarms, cells = _chain_far_alarms(real_run[0], pfa, "auto")
-    assert alarms <= 2.0 * pfa * cells, f"{alarms / cells / pfa:.2f}x the requested {pfa:g}"
-    alarms, cells = _chain_far_alarms(real_run[0], pfa, "channels")
-    assert alarms > 2.0 * pfa * cells, f"{alarms / cells / pfa:.2f}x the requested {pfa:g}"
+    """Eight channels, the chain's defaults: within 2x of the requested rate on the far-range
+    noise (measured 1.45x / 0.94x; 4,268 cells, so 1e-3 expects 4 alarms and only the upper
+    bound is asserted there). The finding of issue 29: the receiver's anti-alias roll-off
+    lowers the floor ~9 dB over range bins 116-122, and a CA window straddling it fired 3.2x
+    (1e-2) and 8x (1e-3) here; flattening the floor along range (``cfar_range_floor``) is
+    what holds the rate."""
+    rate = _eight_channel_rate(real_run[0], pfa)
+    assert rate <= 2.0, f"{rate:.2f}x the requested {pfa:g}"
+    if pfa >= 1e-2:
+        assert rate >= 0.5, f"{rate:.2f}x the requested {pfa:g}"
+        before = _eight_channel_rate(real_run[0], pfa, cfar_range_floor=False)
+        assert before > 2.0, f"{before:.2f}x the requested {pfa:g} without the flattening"
+
+
+def _beam_fraction(rd: np.ndarray, d: int, r: int) -> float:
+    """Share of a cell's power over its 8 channels that the best single direction explains
+    (TDM phase of either sign): near 1 for one return, ~0.44 (median) for noise."""
+    nd = rd.shape[2]
+    best = 0.0
+    for sign in (1.0, -1.0):
+        v = np.concatenate([rd[0, :, d, r], rd[1, :, d, r] * np.exp(1j * sign * np.pi
+                                                                     * (d - nd // 2) / nd)])
+        beams = np.abs(np.fft.fft(v, 256)) ** 2
+        best = max(best, float(beams.max() / (v.size * np.sum(np.abs(v) ** 2))))
+    return best
+
+
+def test_alarms_left_out_of_the_noise_are_returns(real_run):
+    """Why the noise region starts at range bin 84: most of the default chain's alarms in bins
+    58-83 (beside and behind the moving return; measured 85 of 135) are one direction's
+    return — their channels' beam fraction above what only 1 noise cell in 1000 reaches."""
+    proc, adc = _proc_and_frame(real_run[0], pfa=1e-3)
+    rd = proc.range_doppler(adc)
+    stat, mask = _stage_alarms(proc, adc)
+    noise = np.argwhere(_far_noise(stat.shape))
+    pick = np.random.default_rng(0).choice(len(noise), 2000, replace=False)
+    level = np.quantile([_beam_fraction(rd, d, r) for d, r in noise[pick]], 0.999)
+    near = np.argwhere(mask & (np.arange(stat.shape[1]) >= 58) & (np.arange(stat.shape[1]) < 84))
+    coherent = np.mean([_beam_fraction(rd, d, r) > level for d, r in near])
+    assert len(near) >= 20 and coherent >= 0.5, (len(near), coherent, level)

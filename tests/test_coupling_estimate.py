@@ -240,3 +240,7 @@ def test_calibrate_command_writes_outside_the_dataset_only(released_run, tmp_pat
     assert args.coupling == str(target)
     with pytest.raises(ColoradarError):
         coupling_calibration(res.run_path, None, tmp_path / "missing.txt")
+    # A single-chip file with `--radar cascade` would be silently unused: refused, naming the
+    # file and both radars' sizes.
+    with pytest.raises(ColoradarError, match=r"estimated\.txt.*does not fit the cascade"):
+        coupling_calibration(res.run_path, None, target, "cascade")

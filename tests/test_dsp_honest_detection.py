@@ -110,6 +110,46 @@ def test_plain_sum_overshoots_where_whitening_does_not():
     assert plain / cells > 4e-3 and white / cells < 2e-3, (plain / cells, white / cells)
 
 
+def rolled_off_noise(calib, g: np.random.Generator, start: int, width: int,
+                     depth_db: float) -> np.ndarray:
+    """Unit noise through an IF filter whose power response is flat up to range bin ``start``
+    and falls ``depth_db`` over the next ``width`` bins (then stays down), as a receiver's
+    anti-alias filter does near the band edge; even in frequency, so whichever sign the
+    chain's range axis takes, range bin ``r`` sees the response at ``r``."""
+    x = noise_frame(calib, g, "adc")
+    n = x.shape[-1]
+    k = np.arange(n)
+    gain_db = -depth_db * np.clip((np.minimum(k, n - k) - start) / width, 0.0, 1.0)
+    return np.fft.ifft(np.fft.fft(x, axis=-1) * 10 ** (gain_db / 20),
+                       axis=-1).astype(np.complex64)
+
+
+@pytest.mark.parametrize("pfa", [1e-2, 1e-3])
+def test_false_alarm_rate_holds_across_a_receiver_roll_off(pfa):
+    """Issue 29's finding on OpenRadar's real frame, planted: the floor falls 10 dB over 8
+    range bins near the band edge. A CA window that straddles the fall takes the cells on its
+    high side for quieter than they are (the real frame: 4x at 1e-2, 10x at 1e-3 there); with
+    the floor flattened along range (``cfar_range_floor``, the default) the cells from 10 bins
+    before the fall to the last bin fire at the requested rate within 2x (before: 4.8x, 9.4x)."""
+    calib = radar("single_chip")
+    nr = calib.heatmap.num_range_bins
+    start = nr - 24
+    kw = dict(pfa=pfa, min_range=0.0, peak_grouping=False, sidelobe_guard=False,
+              coupling_subtraction=False)
+    procs = {on: RadarProcessor(calib, cfar_range_floor=on, **kw) for on in (True, False)}
+    cells = calib.waveform.num_chirps * (nr - (start - 10))
+    frames = int(np.ceil(EXPECTED / (pfa * cells)))
+    g = np.random.default_rng(29)
+    counts = dict.fromkeys(procs, 0)
+    for _ in range(frames):
+        x = rolled_off_noise(calib, g, start, 8, 10.0)
+        for on, proc in procs.items():
+            counts[on] += int(np.sum(proc.detect(x).range_bin >= start - 10))
+    ratio = {on: c / (frames * cells * pfa) for on, c in counts.items()}
+    assert 0.5 <= ratio[True] <= 2.0, ratio
+    assert ratio[False] > 3.0, ratio            # what the flattening is for
+
+
 # ----------------------------------------------------------------- Doppler beyond ±v_max
 def trial(calib, proc, g, v_range, snr_db, i):
     """One target beyond v_max; returns (azimuth error in bins, range-rate error in bins)."""

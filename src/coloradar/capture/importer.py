@@ -34,6 +34,7 @@ from ..calib import (
 )
 from ..errors import FormatError, OutputExistsError, ReadError, SettingsError
 from ..formats.atomic import atomic_write_bytes, atomic_write_text
+from ..formats.binary import encode_adc
 from ..formats.layout import COLORADAR
 from ..formats.text import format_timestamps
 from .boards import Board, get_board, run_antenna
@@ -316,13 +317,6 @@ def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Fram
 
 
 # -------------------------------------------------------------------------------- writing
-def _encode(frame: np.ndarray) -> bytes:
-    iq = np.empty((*frame.shape, 2), dtype="<i2")
-    iq[..., 0] = np.clip(np.rint(frame.real), -32768, 32767)
-    iq[..., 1] = np.clip(np.rint(frame.imag), -32768, 32767)
-    return iq.tobytes()
-
-
 def _calib_texts(cfg: CaptureConfig, board: Board, radar: str) -> tuple[dict[str, str], WaveformConfig]:
     w = WaveformConfig(
         num_rx=cfg.num_rx, num_tx=cfg.num_tx, num_samples=cfg.num_samples,
@@ -393,7 +387,7 @@ def _write_run(tmp: Path, fr: _Frames, radar: str, spec: CaptureImport
                     continue
                 frame = np.zeros_like(frame)
                 zeroed.append(i)
-            atomic_write_bytes(tmp / stream.frame_path(COLORADAR.first_frame + i), _encode(frame))
+            atomic_write_bytes(tmp / stream.frame_path(COLORADAR.first_frame + i), encode_adc(frame))
             written += 1
     atomic_write_text(tmp / stream.timestamps_path, format_timestamps(times))
     return left, zeroed, written

@@ -145,9 +145,12 @@ def summary(data: np.ndarray, standard_error: np.ndarray, released) -> list[str]
 
 
 def coupling_calibration(path: str | os.PathLike[str], calib: str | None,
-                         coupling: str | os.PathLike[str]) -> Calibration:
+                         coupling: str | os.PathLike[str], radar: str | None = None
+                         ) -> Calibration:
     """``coloradar process --coupling FILE``: the calibration of ``path`` (a run or a dataset
-    root; ``calib`` overrides it) with the radar of the file's size taking its coupling."""
+    root; ``calib`` overrides it) with the radar of the file's size taking its coupling;
+    ``radar`` (the one radar processed, None for both) must be that radar, else a
+    ``CalibrationError`` (a file the processed radar would silently not use)."""
     if calib is not None:
         base = load_calibration(calib)
     else:
@@ -155,4 +158,4 @@ def coupling_calibration(path: str | os.PathLike[str], calib: str | None,
             base = open_sequence(path).calib
         except MissingDataError:
             base = open_dataset(path).calib
-    return with_coupling(base, coupling)
+    return with_coupling(base, coupling, radar)

@@ -105,7 +105,9 @@ def run(args: argparse.Namespace) -> int:
     check_input_path(args.path, "a run folder, a run .zip or a dataset root folder")
     check_output_outside_dataset(args.out, (args.path, args.calib))
     try:
-        calib = coupling_calibration(args.path, args.calib, args.coupling) if args.coupling else args.calib
+        one = None if args.radar == "all" else args.radar
+        calib = (coupling_calibration(args.path, args.calib, args.coupling, one)
+                 if args.coupling else args.calib)
         report = process(args.path, args.out, runs=args.runs, calib=calib,
                          radars=args.radar, products=args.products, frames=args.frames,
                          overwrite=args.overwrite, settings=settings, executor=executor,

@@ -134,12 +134,21 @@ class CFARSettings:
     cfar_looks
         Looks of the summed power the threshold is computed for. ``"channels"`` (default):
         Ntx·Nrx, exact for independent receiver noise; scene content the channels share
-        (clutter, phase-noise skirts, weak returns) then crosses it more often than ``pfa``
-        (OpenRadar's real frame: 11x at 1e-3 on its far-range cells, docs/capture.md).
+        (clutter, phase-noise skirts, weak returns) then crosses it more often than ``pfa``.
         ``"auto"``: measured in every frame (:func:`coloradar.dsp.cfar.effective_looks`,
-        between 1 and Ntx·Nrx): holds ``pfa`` within 2x on that frame and on common-mode
-        noise, and comes out as Ntx·Nrx on independent noise, but treats dense weak returns
-        as noise too (the demo's corridor: a third to two thirds fewer points, docs/dsp.md).
+        between 1 and Ntx·Nrx): holds ``pfa`` within 2x on planted common-mode noise and
+        comes out as Ntx·Nrx on independent noise, but treats dense weak returns as noise
+        too (the demo's corridor: a third to two thirds fewer points, docs/dsp.md).
+    cfar_range_floor
+        Flatten the noise floor along range before the CFAR: every range bin's statistic is
+        divided by its floor (the lower quartile over Doppler, pooled with the two neighbouring
+        range bins) and the CFAR's noise estimate multiplied back. The receiver's noise is not
+        flat in range — the IF high-pass rises over the first bins and the anti-alias filter
+        rolls off over the last — and a training window that straddles such a step lowers the
+        threshold of the cells on its high side (OpenRadar's real frame: 4x the requested rate
+        at 1e-2 and 10x at 1e-3 on the cells before the roll-off, docs/capture.md). A quantile
+        over Doppler ignores the returns of a range bin unless they fill three quarters of it.
+        False: the CFAR sees the statistic as it is (the chain before issue 29).
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping
@@ -158,6 +167,7 @@ class CFARSettings:
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
     cfar_looks: CFARLooks = "channels"
+    cfar_range_floor: bool = True
     min_range: float = 0.3
     peak_grouping: bool = True
 
@@ -319,6 +329,7 @@ class ProcessingSettings:
     cfar_excision: bool = True
     noise_weighting: NoiseWeighting = "whiten"
     cfar_looks: CFARLooks = "channels"
+    cfar_range_floor: bool = True
     doppler_unwrap: float = 10.0
     alias_margin_db: float = 0.0
     heatmap_unwrap: bool = False

@@ -21,6 +21,7 @@ from ..cfar import (
     effective_looks,
     effective_train_cells,
     power_correlation,
+    range_floor,
     run_cfar,
 )
 from ..cube_stage import CubeStage
@@ -220,11 +221,12 @@ class CFARStage:
         cmodes: tuple[CFAREdge, CFAREdge] = ("wrap", "truncate")
         r0 = max(0, min(max(self.notch_bins, self.first_range),
                         stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
-        res = run_cfar(stat[:, r0:], CFARConfig("ca", s.cfar_guard, s.cfar_train, s.pfa,
-                                                s.cfar_rank, looks, cmodes, 1, self.ca_factor,
-                                                s.cfar_excision))
+        part = self._flattened(stat[:, r0:])
+        res = run_cfar(part, CFARConfig("ca", s.cfar_guard, s.cfar_train, s.pfa,
+                                        s.cfar_rank, looks, cmodes, 1, self.ca_factor,
+                                        s.cfar_excision))
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = stat[:, r0:] / res.noise
+            ratio = part / res.noise
         return effective_looks(ratio, self.ca_train, looks, pfa=s.pfa)
 
     def _run(self, stat: np.ndarray, looks: float) -> tuple[np.ndarray, np.ndarray]:
@@ -235,14 +237,20 @@ class CFARStage:
         # DC removal notches the first range bins (the window spreads the notch): they would
         # lower the noise estimate of their neighbours, so the CFAR map starts after them.
         r0 = max(0, min(self.notch_bins, stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
-        res = run_cfar(stat[:, r0:], CFARConfig(s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa,
-                                                s.cfar_rank, looks, cmodes, 1, self.cell_factor,
-                                                s.cfar_excision))
+        part = stat[:, r0:]
+        floor = range_floor(part) if s.cfar_range_floor else None
+        res = run_cfar(part if floor is None else part / floor,
+                       CFARConfig(s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa, s.cfar_rank,
+                                  looks, cmodes, 1, self.cell_factor, s.cfar_excision))
         mask = np.zeros(stat.shape, dtype=bool)
         mask[:, r0:] = res.detections
         noise = np.full(stat.shape, np.inf)
-        noise[:, r0:] = res.noise
+        noise[:, r0:] = res.noise if floor is None else res.noise * floor
         return mask, noise
+
+    def _flattened(self, stat: np.ndarray) -> np.ndarray:
+        """``stat`` with its floor flattened along range (``cfar_range_floor``), else as is."""
+        return stat / range_floor(stat) if self.settings.cfar_range_floor else stat
 
     def beam_noise_factor(self, sig2: np.ndarray | None) -> float:
         """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""
