@@ -7,7 +7,7 @@ import json
 import warnings
 from pathlib import Path
 
-from ..errors import DataWarning
+from ..errors import ColoradarError, DataWarning
 from ..odometry import evaluate_odometry, format_evaluation, write_evaluation
 from ..odometry.metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
 from ._common import UsageError, check_input, check_output_outside_dataset
@@ -73,7 +73,7 @@ def _check_time_overlap(folder: str, run: str | None, calib: str | None) -> None
     try:
         est = read_tum(Path(folder) / "trajectory.txt").timestamps
         gt = open_sequence(run, calib=calib).groundtruth.timestamps
-    except Exception:  # evaluate_odometry says what is wrong, with its own message
+    except (ColoradarError, OSError):  # evaluate_odometry says what is wrong, in its words
         return
     if len(est) < 2 or len(gt) < 2:
         return

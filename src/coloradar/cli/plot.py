@@ -22,20 +22,21 @@ def _frame_index(seq, args: argparse.Namespace) -> int:
     given, for the view's own error)."""
     if args.frame >= 0:
         return args.frame
-    from ..viz.scene import REFERENCE_STREAMS, _has, _stream, radar_source
+    from ..viz.scene import REFERENCE_STREAMS, radar_source
 
+    present = seq.available()
     if args.view == "scene":
         name = args.stream or (radar_source(seq, args.radar) if args.radar else
-                               next((s for s in REFERENCE_STREAMS if _has(seq, s)), None))
+                               next((s for s in REFERENCE_STREAMS if s in present), None))
     else:
         radar = args.radar or "cascade"
-        has_adc = _has(seq, f"{radar}/adc")
-        use_hm = _has(seq, f"{radar}/heatmaps") and (
+        has_adc = f"{radar}/adc" in present
+        use_hm = f"{radar}/heatmaps" in present and (
             args.view == "heatmap" or (args.view == "range-azimuth" and not has_adc))
         name = f"{radar}/heatmaps" if use_hm else f"{radar}/adc" if has_adc else None
-    if name is None or not _has(seq, name):
+    if name is None or name not in present:
         return args.frame
-    n = len(_stream(seq, name).timestamps)
+    n = len(seq.stream(name).timestamps)
     return args.frame + n if -n <= args.frame else args.frame
 
 
