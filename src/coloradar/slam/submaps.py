@@ -3,8 +3,9 @@
 - **Static points** of a frame (:func:`static_points`): the points whose range rate is what a
   static point at their place shows under the frame's ego-velocity, ``vr ≈ −d·v``
   (docs/odometry.md): moving objects, multipath ghosts with a wrong Doppler and noise drop out.
-- **Frame store** (:class:`FrameStore`): each frame's static points, kept in a temporary file
-  (not in memory) until the submaps are built, so memory stays flat in the run's length.
+- **Frame store** (:class:`.stores.FrameStore`): each frame's static points, kept in a
+  temporary file (not in memory) until the submaps are built, so memory stays flat in the
+  run's length.
 - **Keyframes** (:func:`select_keyframes`): every ``keyframe_distance`` metres or
   ``keyframe_angle_deg`` degrees of odometry motion.
 - **Submaps** (:func:`build_submap`): the static points of the frames within
@@ -21,9 +22,8 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,7 +32,10 @@ from ..calib import RadarCalib
 from ..geometry import SE3, Trajectory, voxel_downsample
 from .settings import SlamSettings
 
-__all__ = ["FrameStore", "PointAccuracy", "Submap", "build_submap", "descriptor_distance",
+if TYPE_CHECKING:
+    from .stores import FrameStore
+
+__all__ = ["PointAccuracy", "Submap", "Submaps", "build_submap", "descriptor_distance",
            "point_accuracy", "point_covariances", "scan_context", "select_keyframes",
            "static_points", "surface_covariances"]
 
@@ -109,39 +112,6 @@ def static_points(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
     return c[ok][keep][:, :4].astype(np.float32)
 
 
-class FrameStore:
-    """Each frame's static points in an unlinked temporary file, read back by frame index.
-
-    Memory holds two integers per frame; the points live on disk (a few kB a frame) and are
-    gone when the store is closed (or collected).
-    """
-
-    def __init__(self) -> None:
-        fd, name = tempfile.mkstemp(prefix="coloradar_slam_", suffix=".bin")
-        self._f = os.fdopen(fd, "w+b")
-        os.unlink(name)  # nothing is left behind, whatever happens to the process
-        self._offsets: list[int] = [0]
-
-    def append(self, points: np.ndarray) -> None:
-        """Store the next frame's float32 ``(K, 4)`` points."""
-        a = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 4)
-        self._f.seek(self._offsets[-1])
-        self._f.write(a.tobytes())
-        self._offsets.append(self._offsets[-1] + a.nbytes)
-
-    def __len__(self) -> int:
-        return len(self._offsets) - 1
-
-    def read(self, k: int) -> np.ndarray:
-        """float32 ``(K, 4)`` of frame ``k``."""
-        a, b = self._offsets[k], self._offsets[k + 1]
-        self._f.seek(a)
-        return np.frombuffer(self._f.read(b - a), dtype=np.float32).reshape(-1, 4)
-
-    def close(self) -> None:
-        self._f.close()
-
-
 def select_keyframes(traj: Trajectory, usable: np.ndarray, distance: float,
                      angle: float) -> np.ndarray:
     """int64 indices of the keyframes: the first usable frame, then each usable frame whose
@@ -186,6 +156,14 @@ class Submap:
     covariances: np.ndarray
     descriptor: np.ndarray
     surface: np.ndarray | None = None
+
+
+class Submaps(Protocol):
+    """The keyframes' submaps by number: a list, or a :class:`.stores.SubmapStore` (on disk)."""
+
+    def __getitem__(self, k: int, /) -> Submap: ...
+
+    def __len__(self) -> int: ...
 
 
 def surface_covariances(points: np.ndarray, spread: float, k: int = 10) -> np.ndarray:
