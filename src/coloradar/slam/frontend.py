@@ -185,19 +185,20 @@ def _psd(a: np.ndarray) -> np.ndarray:
 
 
 def relative_covariance(fe: FrontEnd, i: int, j: int, floor_translation: float,
-                        floor_rotation: float, steps: int = 1) -> np.ndarray:
+                        floor_rotation: float, steps: int = 1, scale: float = 1.0
+                        ) -> np.ndarray:
     """Covariance ``(6, 6)`` of the motion ``T_i⁻¹ T_j`` between keyframes ``i < j``
     (numbers in :attr:`FrontEnd.keyframes`), in GTSAM's ``Pose3`` tangent order (rotation
     [rad²], then translation [m²], both in frame ``j``, as GTSAM's ``BetweenFactorPose3``
     measures its error).
 
     ``P_j − P_i`` of the marginal position and attitude blocks (see the module docstring),
-    rotated into frame ``j``, plus ``steps`` times the floors' squares.
+    rotated into frame ``j``, times ``scale``, plus ``steps`` times the floors' squares.
     """
     r_j = fe.trajectory.rotations[int(fe.keyframes[j])].as_matrix()
     dp = _psd(fe.covariance[j, :3, :3] - fe.covariance[i, :3, :3])
     dr = _psd(fe.covariance[j, 3:, 3:] - fe.covariance[i, 3:, 3:])
     out = np.zeros((6, 6))
-    out[:3, :3] = r_j.T @ dr @ r_j + steps * floor_rotation**2 * np.eye(3)
-    out[3:, 3:] = r_j.T @ dp @ r_j + steps * floor_translation**2 * np.eye(3)
+    out[:3, :3] = scale * (r_j.T @ dr @ r_j) + steps * floor_rotation**2 * np.eye(3)
+    out[3:, 3:] = scale * (r_j.T @ dp @ r_j) + steps * floor_translation**2 * np.eye(3)
     return out

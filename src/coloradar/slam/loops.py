@@ -112,7 +112,7 @@ def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_co
     dist = np.linalg.norm(d, axis=1)
     reach = settings.loop_search_radius
     u = d / np.maximum(dist, 1e-9)[:, None]
-    cov = position_cov[j] - position_cov[earlier]
+    cov = settings.odometry_cov_scale * (position_cov[j] - position_cov[earlier])
     var = (np.einsum("ni,nij,nj->n", u, cov, u)
            + (j - earlier) * settings.odometry_floor_translation**2)
     gate = np.maximum(dist - reach, 0.0) / np.sqrt(np.maximum(var, 1e-12))

@@ -180,7 +180,7 @@ def _odometry_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings) -> list[Edg
     for n in range(1, kfs.size):
         a, b = int(kfs[n - 1]), int(kfs[n])
         rel = traj[a].inverse() @ traj[b]
-        cov = relative_covariance(fe, n - 1, n, fl_t, fl_r)
+        cov = relative_covariance(fe, n - 1, n, fl_t, fl_r, scale=s.odometry_cov_scale)
         edges.append(Edge(n - 1, n, rel, cov, "odometry"))
         if s.refine_odometry:
             reg = register(submaps[n - 1], submaps[n], rel, s)
@@ -205,7 +205,8 @@ def _loops(fe: FrontEnd, submaps: SubmapStore, s: SlamSettings, planar: bool
         for c in loop_candidates(j, pos, path, cov_p, submaps.descriptor, s):
             a, b = int(kfs[c.i]), int(kfs[c.j])
             rel = traj[a].inverse() @ traj[b]
-            cov = relative_covariance(fe, c.i, c.j, fl_t, fl_r, steps=c.j - c.i)
+            cov = relative_covariance(fe, c.i, c.j, fl_t, fl_r, steps=c.j - c.i,
+                                      scale=s.odometry_cov_scale)
             out.append(verify_loop(c, submaps, rel, cov, s, planar))
     return out
 
@@ -318,18 +319,17 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
     fe, submaps = _frontend_and_submaps(clouds, timestamps, calib, (imu_timestamps, imu_data),
                                         radar, fs, s, groundtruth, tm)
     try:
-        traj, kfs = fe.trajectory, fe.keyframes
+        odo, kfs = fe.trajectory, fe.keyframes
         if kfs.size == 0:
-            return SlamResult(traj, traj, kfs, None, None, [], np.zeros((0, 5), np.float32),
+            return SlamResult(odo, odo, kfs, None, None, [], np.zeros((0, 5), np.float32),
                               fe, np.zeros(0, np.int64), tm)
-        before = traj[kfs]
         records = _loops(fe, submaps, s, elevation_rows(calib.radar(radar)) < 3)
         _lap("loops", t0, tm)
         records, after = _optimise(fe, submaps, s, records)
         _lap("graph", t0, tm)
-        out = correct_frames(traj, kfs, before, after)
+        out = correct_frames(fe.trajectory, kfs, fe.trajectory[kfs], after)
         m = build_slam_map(submaps, after, s.map_voxel, s.map_min_keyframes)
         _lap("map", t0, tm)
-        return SlamResult(traj, out, kfs, before, after, records, m, fe, submaps.sizes(), tm)
+        return SlamResult(odo, out, kfs, odo[kfs], after, records, m, fe, submaps.sizes(), tm)
     finally:
         submaps.close()
