@@ -15,7 +15,7 @@ per step (:func:`relative_covariance`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,13 +169,17 @@ def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: Keyfra
 def radar_inertial_frontend(track: EgoVelocityTrack, still: np.ndarray, calib: Calibration,
                             imu_timestamps: np.ndarray, imu_data: np.ndarray, *, radar: str,
                             keyframes: KeyframeRule, groundtruth: Trajectory | None = None,
-                            config: RioConfig | None = None) -> FrontEnd:
+                            config: RioConfig | None = None,
+                            points: Sequence[np.ndarray] | None = None) -> FrontEnd:
     """Run the radar-inertial filter (:func:`coloradar.odometry.rio_odometry`) on one radar's
-    ego-velocities and the IMU; the initial pose is the ground truth's when given. The
-    filter's result is reduced to a :class:`FrontEnd` (``keyframes`` picks where its
-    covariances are kept) and freed on return."""
+    ego-velocities and the IMU, as ``coloradar odometry`` runs it: with ``points`` (the
+    frames' clouds ``(N_k, 5)``, e.g. :meth:`.stores.FrameStore.clouds`) every point updates
+    the filter (its default, tightly coupled update). The initial pose is the ground truth's
+    when given. The filter's result is reduced to a :class:`FrontEnd` (``keyframes`` picks
+    where its covariances are kept) and freed on return."""
     res = rio_odometry(track, calib, imu_timestamps, imu_data, radars=(radar,),
-                       config=config or RioConfig(), groundtruth=groundtruth, still=[still])
+                       config=config or RioConfig(), groundtruth=groundtruth, still=[still],
+                       points=None if points is None else [points])
     return frontend_from_rio(res, track, keyframes)
 
 

@@ -2,7 +2,8 @@
 
 - :class:`Growing`: a numpy array that grows by doubling (a per-frame column costs its bytes,
   not a Python object per frame).
-- :class:`FrameStore`: each frame's static points, until the keyframes' submaps are built.
+- :class:`FrameStore`: each frame's cloud and its static points, for the filter's
+  point-by-point update and until the keyframes' submaps are built.
 - :class:`SubmapStore`: every keyframe's submap (points, intensities, covariances, surface
   terms as float32, the descriptor), read back one at a time for loop verification and the
   map.
@@ -15,12 +16,14 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterator, Sequence
+from typing import overload
 
 import numpy as np
 
 from .submaps import Submap
 
-__all__ = ["FrameStore", "Growing", "SubmapStore"]
+__all__ = ["Clouds", "FrameStore", "Growing", "SubmapStore"]
 
 
 class Growing:
@@ -77,7 +80,8 @@ class _TempFile:
 
 
 class FrameStore(_TempFile):
-    """Each frame's static points, float32 ``(K, 4)`` ``x y z intensity``, by frame index.
+    """Each frame's cloud, float32 ``(N, 5)`` ``x y z intensity range_rate``, and which of its
+    points are static, by frame index.
 
     Memory holds 8 bytes per frame; the points live in an unlinked temporary file.
     """
@@ -85,13 +89,55 @@ class FrameStore(_TempFile):
     def __init__(self) -> None:
         super().__init__("coloradar_slam_frames_")
 
-    def append(self, points: np.ndarray) -> None:
-        """Store the next frame's float32 ``(K, 4)`` points."""
-        self._write(np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 4).tobytes())
+    def append(self, cloud: np.ndarray, static: np.ndarray) -> None:
+        """Store the next frame's cloud ``(N, 5)`` and its bool ``(N,)`` static mask."""
+        c = np.asarray(cloud, dtype=np.float32)
+        c = c[:, :5] if c.ndim == 2 and c.shape[1] >= 5 else np.zeros((0, 5), np.float32)
+        rows = np.column_stack([c, np.asarray(static, dtype=np.float32).reshape(-1)[:len(c)]])
+        self._write(np.ascontiguousarray(rows, dtype=np.float32).tobytes())
+
+    def _rows(self, k: int) -> np.ndarray:
+        return np.frombuffer(self._read(k), dtype=np.float32).reshape(-1, 6)
 
     def read(self, k: int) -> np.ndarray:
-        """float32 ``(K, 4)`` of frame ``k``."""
-        return np.frombuffer(self._read(k), dtype=np.float32).reshape(-1, 4)
+        """float32 ``(K, 4)`` ``x y z intensity`` of frame ``k``'s static points."""
+        rows = self._rows(k)
+        return rows[rows[:, 5] > 0, :4]
+
+    def cloud(self, k: int) -> np.ndarray:
+        """float32 ``(N, 5)``: frame ``k``'s cloud."""
+        return self._rows(k)[:, :5]
+
+    def clouds(self) -> Clouds:
+        """The clouds as a read-only sequence (each read from disk when asked for)."""
+        return Clouds(self)
+
+
+class Clouds(Sequence[np.ndarray]):
+    """A :class:`FrameStore`'s clouds as a sequence, read one at a time (what the filter's
+    point-by-point update takes, without every cloud in memory)."""
+
+    def __init__(self, store: FrameStore) -> None:
+        self._store = store
+
+    def __len__(self) -> int:
+        return len(self._store)
+
+    @overload
+    def __getitem__(self, k: int) -> np.ndarray: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[np.ndarray]: ...
+
+    def __getitem__(self, k: int | slice) -> np.ndarray | list[np.ndarray]:
+        if isinstance(k, slice):
+            return [self._store.cloud(i) for i in range(*k.indices(len(self)))]
+        if not -len(self) <= k < len(self):
+            raise IndexError(k)
+        return self._store.cloud(k % len(self))
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return (self._store.cloud(i) for i in range(len(self)))
 
 
 _UPPER = np.triu_indices(3)

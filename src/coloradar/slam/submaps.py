@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 
 __all__ = ["PointAccuracy", "Submap", "Submaps", "build_submap", "descriptor_distance",
            "point_accuracy", "point_covariances", "scan_context", "select_keyframes",
-           "static_points", "surface_covariances"]
+           "static_mask", "static_points", "surface_covariances"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,20 @@ def point_covariances(xyz: np.ndarray, acc: PointAccuracy) -> np.ndarray:
     return np.einsum("nik,nk,njk->nij", basis, s**2, basis)
 
 
+def static_mask(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
+                min_range: float, max_range: float) -> np.ndarray:
+    """bool ``(N,)``: the static points of one frame (see :func:`static_points`); all False
+    when the cloud is not ``(N, 5)`` or the velocity is unknown."""
+    c = np.asarray(cloud, dtype=np.float64)
+    if c.ndim != 2 or c.shape[0] == 0 or c.shape[1] < 5 or not np.all(np.isfinite(velocity)):
+        return np.zeros(c.shape[0] if c.ndim == 2 else 0, dtype=bool)
+    r = np.linalg.norm(c[:, :3], axis=1)
+    ok = np.isfinite(r) & (r > min_range) & (r < max_range) & np.isfinite(c[:, 4])
+    resid = np.full(c.shape[0], np.inf)
+    resid[ok] = c[ok, 4] + (c[ok, :3] / r[ok, None]) @ np.asarray(velocity, dtype=np.float64)
+    return np.abs(resid) < threshold
+
+
 def static_points(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
                   min_range: float, max_range: float) -> np.ndarray:
     """float32 ``(K, 4)``: ``x y z intensity`` of the static points of one frame.
@@ -101,15 +115,10 @@ def static_points(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
     min_range, max_range
         Range limits [m].
     """
-    c = np.asarray(cloud, dtype=np.float64)
-    if c.ndim != 2 or c.shape[0] == 0 or not np.all(np.isfinite(velocity)):
+    keep = static_mask(cloud, velocity, threshold, min_range, max_range)
+    if not keep.any():
         return np.zeros((0, 4), dtype=np.float32)
-    r = np.linalg.norm(c[:, :3], axis=1)
-    ok = np.isfinite(r) & (r > min_range) & (r < max_range) & np.isfinite(c[:, 4])
-    d = c[ok, :3] / r[ok, None]
-    resid = c[ok, 4] + d @ np.asarray(velocity, dtype=np.float64)
-    keep = np.abs(resid) < threshold
-    return c[ok][keep][:, :4].astype(np.float32)
+    return np.asarray(cloud)[keep][:, :4].astype(np.float32)
 
 
 def select_keyframes(traj: Trajectory, usable: np.ndarray, distance: float,

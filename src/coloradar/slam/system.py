@@ -1,7 +1,9 @@
 """Radar SLAM from one radar's point clouds and the IMU: :func:`slam_from_clouds`.
 
-1. Ego-velocity of every frame; its static points go to a :class:`.stores.FrameStore`.
-2. The radar-inertial filter (:mod:`.frontend`): a pose and covariance at every frame.
+1. Ego-velocity of every frame; the cloud and which of its points are static go to a
+   :class:`.stores.FrameStore` (on disk).
+2. The radar-inertial filter (:mod:`.frontend`), as ``coloradar odometry`` runs it (every
+   point updates it, read back from the store): a pose and covariance at every frame.
 3. Keyframes and their submaps (:mod:`.submaps`).
 4. Odometry factors between consecutive keyframes; optionally a registration factor beside each
    (``refine_odometry``), kept when it agrees with the odometry.
@@ -40,7 +42,7 @@ from .loops import LoopRecord, loop_candidates, verify_loop
 from .registration import register
 from .settings import SlamSettings
 from .stores import FrameStore, SubmapStore
-from .submaps import Submaps, build_submap, point_accuracy, select_keyframes, static_points
+from .submaps import Submaps, build_submap, point_accuracy, select_keyframes, static_mask
 
 __all__ = ["SlamResult", "build_slam_map", "correct_frames", "keyframe_trajectory", "slam_from_clouds"]
 
@@ -245,7 +247,7 @@ def _frontend_and_submaps(clouds: Iterable[np.ndarray], timestamps: np.ndarray,
     try:
         def keep(k, cloud, est):
             v = est.velocity if est.ok else np.full(3, np.nan)
-            store.append(static_points(cloud, v, thr, s.min_range, s.max_range))
+            store.append(cloud, static_mask(cloud, v, thr, s.min_range, s.max_range))
 
         track, still = estimate_track(clouds, timestamps, ego_config, seed=fs.seed, frame=radar,
                                       on_frame=keep, zero_velocity=rio_config.zero_velocity)
@@ -253,7 +255,8 @@ def _frontend_and_submaps(clouds: Iterable[np.ndarray], timestamps: np.ndarray,
         dist, ang = s.keyframe_distance, np.radians(s.keyframe_angle_deg)
         fe = radar_inertial_frontend(
             track, still, calib, imu[0], imu[1], radar=radar, groundtruth=groundtruth,
-            config=rio_config, keyframes=lambda traj, ok: select_keyframes(traj, ok, dist, ang))
+            config=rio_config, keyframes=lambda traj, ok: select_keyframes(traj, ok, dist, ang),
+            points=store.clouds())
         del track, still
         _lap("filter", t0, tm)
         acc = point_accuracy(calib.radar(radar), s)
