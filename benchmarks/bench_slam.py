@@ -71,8 +71,10 @@ def _track(r):
 
 
 def _filter(r, track, still):
+    """The filter as ``coloradar odometry`` and SLAM's front end run it (every point updates
+    it; the clouds in memory here, the caller's)."""
     return rio_odometry(track, r.calib, r.imu_timestamps, r.imu_data, radars=(r.radar,),
-                        groundtruth=r.groundtruth, still=[still])
+                        groundtruth=r.groundtruth, still=[still], points=[r.clouds])
 
 
 def _status_kb(field: str) -> int:
