@@ -3,9 +3,9 @@
 - **Static points** of a frame (:func:`static_points`): the points whose range rate is what a
   static point at their place shows under the frame's ego-velocity, ``vr ≈ −d·v``
   (docs/odometry.md): moving objects, multipath ghosts with a wrong Doppler and noise drop out.
-- **Frame store** (:class:`.stores.FrameStore`): each frame's static points, kept in a
-  temporary file (not in memory) until the submaps are built, so memory stays flat in the
-  run's length.
+- **Frame store** (:class:`.stores.FrameStore`, seen here as :class:`StaticPoints`): each
+  frame's cloud and static points, kept in a temporary file (not in memory) until the
+  submaps are built, so memory stays flat in the run's length.
 - **Keyframes** (:func:`select_keyframes`): every ``keyframe_distance`` metres or
   ``keyframe_angle_deg`` degrees of odometry motion.
 - **Submaps** (:func:`build_submap`): the static points of the frames within
@@ -23,7 +23,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,10 +32,7 @@ from ..calib import RadarCalib
 from ..geometry import SE3, Trajectory, voxel_downsample
 from .settings import SlamSettings
 
-if TYPE_CHECKING:
-    from .stores import FrameStore
-
-__all__ = ["PointAccuracy", "Submap", "Submaps", "build_submap", "descriptor_distance",
+__all__ = ["PointAccuracy", "StaticPoints", "Submap", "Submaps", "build_submap", "descriptor_distance",
            "point_accuracy", "point_covariances", "scan_context", "select_keyframes",
            "static_mask", "static_points", "surface_covariances"]
 
@@ -167,6 +164,12 @@ class Submap:
     surface: np.ndarray | None = None
 
 
+class StaticPoints(Protocol):
+    """Each frame's static points by frame index (:class:`.stores.FrameStore`)."""
+
+    def read(self, k: int, /) -> np.ndarray: ...
+
+
 class Submaps(Protocol):
     """The keyframes' submaps by number: a list, or a :class:`.stores.SubmapStore` (on disk)."""
 
@@ -192,7 +195,7 @@ def surface_covariances(points: np.ndarray, spread: float, k: int = 10) -> np.nd
     return spread**2 * (np.eye(3) - np.einsum("ni,nj->nij", normal, normal))
 
 
-def build_submap(k: int, traj: Trajectory, store: FrameStore, base_T_radar: SE3,
+def build_submap(k: int, traj: Trajectory, store: StaticPoints, base_T_radar: SE3,
                  acc: PointAccuracy, settings: SlamSettings, frames: np.ndarray | None = None
                  ) -> Submap:
     """The submap of keyframe ``k`` (frames within ``submap_window`` seconds of it); pose

@@ -294,7 +294,7 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
     ----------
     clouds
         float ``(N_k, 5)`` ``x y z intensity range_rate`` (radar frame), one per timestamp,
-        read once (an iterator is fine: only each frame's static points are kept, on disk).
+        read once (an iterator is fine: each frame is kept on disk, not in memory).
     timestamps
         float64 ``(M,)``: the frames' stamps [s].
     calib
