@@ -15,7 +15,7 @@ per step (:func:`relative_covariance`).
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,9 +26,10 @@ from ..odometry.ego_velocity import EgoVelocityConfig, estimate_ego_velocity
 from ..odometry.rio import RioConfig, RioResult, rio_odometry
 from ..odometry.velocity_track import EgoVelocityTrack
 from ..odometry.zero_velocity import ZeroVelocityConfig, still_world
+from .stores import Growing
 
-__all__ = ["FrontEnd", "FrontEndSettings", "estimate_track", "frontend_from_rio", "radar_inertial_frontend",
-           "relative_covariance"]
+__all__ = ["FrontEnd", "FrontEndSettings", "KeyframeRule", "estimate_track", "frontend_from_rio",
+           "radar_inertial_frontend", "relative_covariance"]
 
 
 @dataclass(frozen=True)
@@ -53,35 +54,74 @@ class FrontEndSettings:
 
 @dataclass(frozen=True, eq=False)
 class FrontEnd:
-    """What SLAM uses of the odometry (M radar frames).
+    """What SLAM keeps of the odometry (M radar frames, K keyframes).
+
+    Per frame only the trajectory, the frame index and a flag (about 80 bytes a frame); the
+    covariances only at the keyframes: memory grows by little with the run's length.
 
     Attributes
     ----------
     trajectory
         ``world_T_base`` at the frames (IMU-clock times, :attr:`trajectory.timestamps`).
-    frame_timestamps
-        float64 ``(M,)``: the radar stamps of those frames [s].
     frames
         int64 ``(M,)``: each pose's frame in the input clouds (the filter starts at the first
         usable frame, so the first input frames may have no pose).
-    covariance
-        float64 ``(M, 6, 6)``: marginal covariance of position [m²] and world-frame attitude
-        (rotation vector) [rad²].
-    velocity
-        float64 ``(M, 3)``: the radar's ego-velocity, radar frame [m/s] (NaN where none).
     ok
         bool ``(M,)``: frames with an ego-velocity.
+    keyframes
+        int64 ``(K,)``: the keyframes' pose indices (chosen by the caller's rule, see
+        :func:`frontend_from_rio`).
+    covariance
+        float64 ``(K, 6, 6)``: marginal covariance of position [m²] and world-frame attitude
+        (rotation vector) [rad²] at the keyframes.
     summary
         A few figures of the filter for ``slam.json``.
     """
 
     trajectory: Trajectory
-    frame_timestamps: np.ndarray
     frames: np.ndarray
-    covariance: np.ndarray
-    velocity: np.ndarray
     ok: np.ndarray
+    keyframes: np.ndarray
+    covariance: np.ndarray
     summary: dict
+
+
+KeyframeRule = Callable[[Trajectory, np.ndarray], np.ndarray]
+"""``(trajectory, usable) -> int64 keyframe indices`` (:func:`.submaps.select_keyframes`)."""
+
+
+class _TrackBuilder:
+    """The columns of an :class:`EgoVelocityTrack`, filled frame by frame (no per-frame
+    Python object is kept: the :class:`EgoVelocity` of a frame, with its inlier mask, is
+    dropped once read)."""
+
+    def __init__(self) -> None:
+        self.velocity = Growing(np.float64, (3,))
+        self.covariance = Growing(np.float64, (3, 3))
+        self.num_points = Growing(np.int64)
+        self.num_inliers = Growing(np.int64)
+        self.sigma = Growing(np.float64)
+        self.ok = Growing(bool)
+        self.reasons: dict[int, str] = {}
+
+    def append(self, e) -> None:
+        if e.reason:
+            self.reasons[len(self.ok)] = e.reason
+        self.velocity.append(e.velocity)
+        self.covariance.append(e.covariance)
+        self.num_points.append(e.num_points)
+        self.num_inliers.append(e.num_inliers)
+        self.sigma.append(e.sigma)
+        self.ok.append(e.ok)
+
+    def track(self, t: np.ndarray, frame: str) -> EgoVelocityTrack:
+        m = len(self.ok)
+        reasons = [""] * m
+        for k, r in self.reasons.items():
+            reasons[k] = r
+        return EgoVelocityTrack(t[:m].copy(), self.velocity.array(), self.covariance.array(),
+                                self.num_points.array(), self.num_inliers.array(),
+                                self.sigma.array(), self.ok.array(), reasons, frame)
 
 
 def estimate_track(clouds: Iterable[np.ndarray], timestamps: np.ndarray, config: EgoVelocityConfig,
@@ -92,44 +132,55 @@ def estimate_track(clouds: Iterable[np.ndarray], timestamps: np.ndarray, config:
     same seeds), and whether each shows a still world.
 
     ``on_frame(k, cloud, estimate)`` is called after each frame, so that a caller can keep what
-    it needs of the cloud (the static points) without holding every cloud.
+    it needs of the cloud (the static points) without holding every cloud; neither the cloud
+    nor the estimate is kept here.
     """
     t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
     zv = zero_velocity or ZeroVelocityConfig()
-    est, still = [], []
+    cols, still = _TrackBuilder(), Growing(bool)
     for k, cloud in enumerate(clouds):
         rng = np.random.default_rng(np.random.SeedSequence([seed, k]))
         e = estimate_ego_velocity(cloud, config=config, rng=rng)
-        est.append(e)
+        cols.append(e)
         still.append(still_world(cloud, zv, config.min_range))
         if on_frame is not None:
             on_frame(k, cloud, e)
-    return EgoVelocityTrack.from_estimates(t[:len(est)], est, frame), np.array(still, dtype=bool)
+    return cols.track(t, frame), still.array()
 
 
-def frontend_from_rio(res: RioResult, track: EgoVelocityTrack) -> FrontEnd:
-    """The :class:`FrontEnd` of a filter result and the ego-velocities that drove it."""
+def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: KeyframeRule
+                      ) -> FrontEnd:
+    """The :class:`FrontEnd` of a filter result and the ego-velocities that drove it: the
+    trajectory and, at the keyframes ``keyframes(trajectory, usable)`` picks, the covariance.
+    Nothing else of ``res`` is kept (drop it after this call)."""
     summary = {"static_frames": int(np.sum(res.static)),
                "time_offset_s": [float(x) for x in res.time_offset[-1]],
                "gyro_bias_rad_s": [float(x) for x in res.gyro_bias[-1]],
                "accel_bias_m_s2": [float(x) for x in res.accel_bias[-1]],
                "stats": res.stats}
     stamps = np.asarray(res.frame_timestamps, dtype=np.float64)
-    frames = np.searchsorted(track.timestamps, stamps).clip(0, len(track) - 1)
-    return FrontEnd(res.trajectory, stamps, frames.astype(np.int64),
-                    np.asarray(res.covariance, dtype=np.float64), track.velocity[frames],
-                    track.ok[frames], summary)
+    frames = np.searchsorted(track.timestamps, stamps).clip(0, len(track) - 1).astype(np.int64)
+    ok = track.ok[frames]
+    kfs = np.asarray(keyframes(res.trajectory, ok), dtype=np.int64)
+    return FrontEnd(res.trajectory, frames, ok, kfs,
+                    np.array(res.covariance[kfs], dtype=np.float64).reshape(-1, 6, 6), summary)
 
 
 def radar_inertial_frontend(track: EgoVelocityTrack, still: np.ndarray, calib: Calibration,
                             imu_timestamps: np.ndarray, imu_data: np.ndarray, *, radar: str,
-                            groundtruth: Trajectory | None = None,
-                            config: RioConfig | None = None) -> FrontEnd:
+                            keyframes: KeyframeRule, groundtruth: Trajectory | None = None,
+                            config: RioConfig | None = None,
+                            points: Sequence[np.ndarray] | None = None) -> FrontEnd:
     """Run the radar-inertial filter (:func:`coloradar.odometry.rio_odometry`) on one radar's
-    ego-velocities and the IMU; the initial pose is the ground truth's when given."""
+    ego-velocities and the IMU, as ``coloradar odometry`` runs it: with ``points`` (the
+    frames' clouds ``(N_k, 5)``, e.g. :meth:`.stores.FrameStore.clouds`) every point updates
+    the filter (its default, tightly coupled update). The initial pose is the ground truth's
+    when given. The filter's result is reduced to a :class:`FrontEnd` (``keyframes`` picks
+    where its covariances are kept) and freed on return."""
     res = rio_odometry(track, calib, imu_timestamps, imu_data, radars=(radar,),
-                       config=config or RioConfig(), groundtruth=groundtruth, still=[still])
-    return frontend_from_rio(res, track)
+                       config=config or RioConfig(), groundtruth=groundtruth, still=[still],
+                       points=None if points is None else [points])
+    return frontend_from_rio(res, track, keyframes)
 
 
 def _psd(a: np.ndarray) -> np.ndarray:
@@ -138,18 +189,20 @@ def _psd(a: np.ndarray) -> np.ndarray:
 
 
 def relative_covariance(fe: FrontEnd, i: int, j: int, floor_translation: float,
-                        floor_rotation: float, steps: int = 1) -> np.ndarray:
-    """Covariance ``(6, 6)`` of the motion ``T_i⁻¹ T_j`` between frames ``i < j``, in GTSAM's
-    ``Pose3`` tangent order (rotation [rad²], then translation [m²], both in frame ``j``, as
-    GTSAM's ``BetweenFactorPose3`` measures its error).
+                        floor_rotation: float, steps: int = 1, scale: float = 1.0
+                        ) -> np.ndarray:
+    """Covariance ``(6, 6)`` of the motion ``T_i⁻¹ T_j`` between keyframes ``i < j``
+    (numbers in :attr:`FrontEnd.keyframes`), in GTSAM's ``Pose3`` tangent order (rotation
+    [rad²], then translation [m²], both in frame ``j``, as GTSAM's ``BetweenFactorPose3``
+    measures its error).
 
     ``P_j − P_i`` of the marginal position and attitude blocks (see the module docstring),
-    rotated into frame ``j``, plus ``steps`` times the floors' squares.
+    rotated into frame ``j``, times ``scale``, plus ``steps`` times the floors' squares.
     """
-    r_i = fe.trajectory.rotations[j].as_matrix()
+    r_j = fe.trajectory.rotations[int(fe.keyframes[j])].as_matrix()
     dp = _psd(fe.covariance[j, :3, :3] - fe.covariance[i, :3, :3])
     dr = _psd(fe.covariance[j, 3:, 3:] - fe.covariance[i, 3:, 3:])
     out = np.zeros((6, 6))
-    out[:3, :3] = r_i.T @ dr @ r_i + steps * floor_rotation**2 * np.eye(3)
-    out[3:, 3:] = r_i.T @ dp @ r_i + steps * floor_translation**2 * np.eye(3)
+    out[:3, :3] = scale * (r_j.T @ dr @ r_j) + steps * floor_rotation**2 * np.eye(3)
+    out[3:, 3:] = scale * (r_j.T @ dp @ r_j) + steps * floor_translation**2 * np.eye(3)
     return out

@@ -23,6 +23,7 @@ look-alike the odometry cannot have drifted to, and the graph's consistency test
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +33,7 @@ from scipy.stats import chi2
 from ..geometry import SE3
 from .registration import register
 from .settings import SlamSettings
-from .submaps import Submap, descriptor_distance
+from .submaps import Submaps, descriptor_distance
 
 __all__ = ["Candidate", "LoopRecord", "loop_candidates", "verify_loop"]
 
@@ -86,7 +87,8 @@ class LoopRecord:
 
 
 def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_cov: np.ndarray,
-                    submaps: list[Submap], settings: SlamSettings) -> list[Candidate]:
+                    descriptor: Callable[[int], np.ndarray], settings: SlamSettings
+                    ) -> list[Candidate]:
     """Candidates of keyframe ``j`` among the earlier keyframes.
 
     Parameters
@@ -99,6 +101,9 @@ def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_co
         float64 ``(K, 3, 3)``: the odometry's marginal position covariance at each keyframe
         [m²]; the relative position of ``i`` and ``j`` has ``P_j − P_i`` plus the odometry's
         translation floor per keyframe step.
+    descriptor
+        ``descriptor(k)``: keyframe ``k``'s :func:`~.submaps.scan_context` (e.g.
+        :meth:`.stores.SubmapStore.descriptor`, which reads only that).
     """
     earlier = np.flatnonzero(path[:j] <= path[j] - settings.loop_min_separation)
     if earlier.size == 0:
@@ -107,14 +112,15 @@ def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_co
     dist = np.linalg.norm(d, axis=1)
     reach = settings.loop_search_radius
     u = d / np.maximum(dist, 1e-9)[:, None]
-    cov = position_cov[j] - position_cov[earlier]
+    cov = settings.odometry_cov_scale * (position_cov[j] - position_cov[earlier])
     var = (np.einsum("ni,nij,nj->n", u, cov, u)
            + (j - earlier) * settings.odometry_floor_translation**2)
     gate = np.maximum(dist - reach, 0.0) / np.sqrt(np.maximum(var, 1e-12))
     out = []
+    mine = descriptor(j)
     for n in np.flatnonzero(gate <= settings.loop_gate_sigma):
         i = int(earlier[n])
-        dd, _ = descriptor_distance(submaps[i].descriptor, submaps[j].descriptor)
+        dd, _ = descriptor_distance(descriptor(i), mine)
         if dd <= settings.max_descriptor_distance:
             out.append(Candidate(i, j, dd, float(gate[n])))
     out.sort(key=lambda c: c.descriptor_distance)
@@ -130,7 +136,7 @@ PLANAR_RELEASE = (np.radians(10.0), 1.0)
 """Standard deviations [rad], [m] added to a planar loop's tilt and height."""
 
 
-def verify_loop(c: Candidate, submaps: list[Submap], odometry: SE3, odometry_cov: np.ndarray,
+def verify_loop(c: Candidate, submaps: Submaps, odometry: SE3, odometry_cov: np.ndarray,
                 settings: SlamSettings, planar: bool = False) -> LoopRecord:
     """Register candidate ``c`` from the odometry's ``i_T_j`` and test it (module docstring);
     ``odometry_cov`` is the ``(6, 6)`` covariance of that relative pose.

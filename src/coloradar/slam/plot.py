@@ -43,7 +43,8 @@ def slam_figure(res: SlamResult, groundtruth: Trajectory | None = None, title: s
     if m.shape[0]:
         ax.scatter(m[:, 0], m[:, 1], s=2, c=np.minimum(m[:, 3], 10), cmap="Greys", vmin=0,
                    vmax=12, linewidths=0, label=f"radar map ({m.shape[0]:,} voxels)")
-    kp = np.array([p.translation for p in res.keyframe_poses]).reshape(-1, 3)
+    kp = (np.zeros((0, 3)) if res.keyframe_poses is None
+          else np.asarray(res.keyframe_poses.translations))
     for accepted, colour in ((False, "tab:red"), (True, "tab:green")):
         segs = [(kp[lp.i, :2], kp[lp.j, :2]) for lp in res.loops if lp.accepted == accepted]
         if segs:

@@ -100,6 +100,8 @@ def _keyframes_csv(res: SlamResult) -> str:
     out = io.StringIO()
     out.write("# keyframe,frame,timestamp,x,y,z,qx,qy,qz,qw,odometry_x,odometry_y,odometry_z,"
               "submap_points\n")
+    if res.keyframe_poses is None or res.keyframe_odometry is None:
+        return out.getvalue()           # no keyframe: the header only
     for n, k in enumerate(res.keyframes):
         p, o = res.keyframe_poses[n], res.keyframe_odometry[n]
         q = p.rotation.as_quat()

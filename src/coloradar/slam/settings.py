@@ -79,6 +79,9 @@ class SlamSettings:
         ``"cauchy"``, ``"huber"`` or ``"none"``: the loop factors' M-estimator.
     odometry_floor_translation, odometry_floor_rotation_deg
         Standard deviations added to every odometry factor (per keyframe step) [m], [deg].
+    odometry_cov_scale
+        Factor on the filter's relative covariance between keyframes (odometry factors and
+        the loop search's gate).
     max_loop_candidates
         At most this many candidates (the best descriptors) are registered per keyframe.
 
@@ -120,6 +123,7 @@ class SlamSettings:
     robust_kernel: str = "cauchy"
     odometry_floor_translation: float = 0.005
     odometry_floor_rotation_deg: float = 0.1
+    odometry_cov_scale: float = 1.0
     max_loop_candidates: int = 2
     map_voxel: float = 0.15
     map_min_keyframes: int = 3

@@ -3,8 +3,9 @@
 - **Static points** of a frame (:func:`static_points`): the points whose range rate is what a
   static point at their place shows under the frame's ego-velocity, ``vr ≈ −d·v``
   (docs/odometry.md): moving objects, multipath ghosts with a wrong Doppler and noise drop out.
-- **Frame store** (:class:`FrameStore`): each frame's static points, kept in a temporary file
-  (not in memory) until the submaps are built, so memory stays flat in the run's length.
+- **Frame store** (:class:`.stores.FrameStore`, seen here as :class:`StaticPoints`): each
+  frame's cloud and static points, kept in a temporary file (not in memory) until the
+  submaps are built, so memory stays flat in the run's length.
 - **Keyframes** (:func:`select_keyframes`): every ``keyframe_distance`` metres or
   ``keyframe_angle_deg`` degrees of odometry motion.
 - **Submaps** (:func:`build_submap`): the static points of the frames within
@@ -21,9 +22,8 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,9 +32,9 @@ from ..calib import RadarCalib
 from ..geometry import SE3, Trajectory, voxel_downsample
 from .settings import SlamSettings
 
-__all__ = ["FrameStore", "PointAccuracy", "Submap", "build_submap", "descriptor_distance",
+__all__ = ["PointAccuracy", "StaticPoints", "Submap", "Submaps", "build_submap", "descriptor_distance",
            "point_accuracy", "point_covariances", "scan_context", "select_keyframes",
-           "static_points", "surface_covariances"]
+           "static_mask", "static_points", "surface_covariances"]
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,20 @@ def point_covariances(xyz: np.ndarray, acc: PointAccuracy) -> np.ndarray:
     return np.einsum("nik,nk,njk->nij", basis, s**2, basis)
 
 
+def static_mask(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
+                min_range: float, max_range: float) -> np.ndarray:
+    """bool ``(N,)``: the static points of one frame (see :func:`static_points`); all False
+    when the cloud is not ``(N, 5)`` or the velocity is unknown."""
+    c = np.asarray(cloud, dtype=np.float64)
+    if c.ndim != 2 or c.shape[0] == 0 or c.shape[1] < 5 or not np.all(np.isfinite(velocity)):
+        return np.zeros(c.shape[0] if c.ndim == 2 else 0, dtype=bool)
+    r = np.linalg.norm(c[:, :3], axis=1)
+    ok = np.isfinite(r) & (r > min_range) & (r < max_range) & np.isfinite(c[:, 4])
+    resid = np.full(c.shape[0], np.inf)
+    resid[ok] = c[ok, 4] + (c[ok, :3] / r[ok, None]) @ np.asarray(velocity, dtype=np.float64)
+    return np.abs(resid) < threshold
+
+
 def static_points(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
                   min_range: float, max_range: float) -> np.ndarray:
     """float32 ``(K, 4)``: ``x y z intensity`` of the static points of one frame.
@@ -98,48 +112,10 @@ def static_points(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
     min_range, max_range
         Range limits [m].
     """
-    c = np.asarray(cloud, dtype=np.float64)
-    if c.ndim != 2 or c.shape[0] == 0 or not np.all(np.isfinite(velocity)):
+    keep = static_mask(cloud, velocity, threshold, min_range, max_range)
+    if not keep.any():
         return np.zeros((0, 4), dtype=np.float32)
-    r = np.linalg.norm(c[:, :3], axis=1)
-    ok = np.isfinite(r) & (r > min_range) & (r < max_range) & np.isfinite(c[:, 4])
-    d = c[ok, :3] / r[ok, None]
-    resid = c[ok, 4] + d @ np.asarray(velocity, dtype=np.float64)
-    keep = np.abs(resid) < threshold
-    return c[ok][keep][:, :4].astype(np.float32)
-
-
-class FrameStore:
-    """Each frame's static points in an unlinked temporary file, read back by frame index.
-
-    Memory holds two integers per frame; the points live on disk (a few kB a frame) and are
-    gone when the store is closed (or collected).
-    """
-
-    def __init__(self) -> None:
-        fd, name = tempfile.mkstemp(prefix="coloradar_slam_", suffix=".bin")
-        self._f = os.fdopen(fd, "w+b")
-        os.unlink(name)  # nothing is left behind, whatever happens to the process
-        self._offsets: list[int] = [0]
-
-    def append(self, points: np.ndarray) -> None:
-        """Store the next frame's float32 ``(K, 4)`` points."""
-        a = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 4)
-        self._f.seek(self._offsets[-1])
-        self._f.write(a.tobytes())
-        self._offsets.append(self._offsets[-1] + a.nbytes)
-
-    def __len__(self) -> int:
-        return len(self._offsets) - 1
-
-    def read(self, k: int) -> np.ndarray:
-        """float32 ``(K, 4)`` of frame ``k``."""
-        a, b = self._offsets[k], self._offsets[k + 1]
-        self._f.seek(a)
-        return np.frombuffer(self._f.read(b - a), dtype=np.float32).reshape(-1, 4)
-
-    def close(self) -> None:
-        self._f.close()
+    return np.asarray(cloud)[keep][:, :4].astype(np.float32)
 
 
 def select_keyframes(traj: Trajectory, usable: np.ndarray, distance: float,
@@ -188,6 +164,20 @@ class Submap:
     surface: np.ndarray | None = None
 
 
+class StaticPoints(Protocol):
+    """Each frame's static points by frame index (:class:`.stores.FrameStore`)."""
+
+    def read(self, k: int, /) -> np.ndarray: ...
+
+
+class Submaps(Protocol):
+    """The keyframes' submaps by number: a list, or a :class:`.stores.SubmapStore` (on disk)."""
+
+    def __getitem__(self, k: int, /) -> Submap: ...
+
+    def __len__(self) -> int: ...
+
+
 def surface_covariances(points: np.ndarray, spread: float, k: int = 10) -> np.ndarray:
     """float64 ``(N, 3, 3)``: ``spread²`` in the plane of each point's ``k`` nearest
     neighbours (the normal is the direction of least spread), zero along the normal: a point
@@ -205,7 +195,7 @@ def surface_covariances(points: np.ndarray, spread: float, k: int = 10) -> np.nd
     return spread**2 * (np.eye(3) - np.einsum("ni,nj->nij", normal, normal))
 
 
-def build_submap(k: int, traj: Trajectory, store: FrameStore, base_T_radar: SE3,
+def build_submap(k: int, traj: Trajectory, store: StaticPoints, base_T_radar: SE3,
                  acc: PointAccuracy, settings: SlamSettings, frames: np.ndarray | None = None
                  ) -> Submap:
     """The submap of keyframe ``k`` (frames within ``submap_window`` seconds of it); pose

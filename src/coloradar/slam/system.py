@@ -1,7 +1,9 @@
 """Radar SLAM from one radar's point clouds and the IMU: :func:`slam_from_clouds`.
 
-1. Ego-velocity of every frame; its static points go to a :class:`.submaps.FrameStore`.
-2. The radar-inertial filter (:mod:`.frontend`): a pose and covariance at every frame.
+1. Ego-velocity of every frame; the cloud and which of its points are static go to a
+   :class:`.stores.FrameStore` (on disk).
+2. The radar-inertial filter (:mod:`.frontend`), as ``coloradar odometry`` runs it (every
+   point updates it, read back from the store): a pose and covariance at every frame.
 3. Keyframes and their submaps (:mod:`.submaps`).
 4. Odometry factors between consecutive keyframes; optionally a registration factor beside each
    (``refine_odometry``), kept when it agrees with the odometry.
@@ -15,6 +17,7 @@
 from __future__ import annotations
 
 import time
+import tracemalloc
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -38,9 +41,10 @@ from .graph import Edge, PoseGraph, optimize_with_consistency
 from .loops import LoopRecord, loop_candidates, verify_loop
 from .registration import register
 from .settings import SlamSettings
-from .submaps import FrameStore, Submap, build_submap, point_accuracy, select_keyframes, static_points
+from .stores import FrameStore, SubmapStore
+from .submaps import Submaps, build_submap, point_accuracy, select_keyframes, static_mask
 
-__all__ = ["SlamResult", "build_slam_map", "correct_frames", "slam_from_clouds"]
+__all__ = ["SlamResult", "build_slam_map", "correct_frames", "keyframe_trajectory", "slam_from_clouds"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +60,8 @@ class SlamResult:
     keyframes
         int64 ``(K,)``: the keyframes' frame indices.
     keyframe_odometry, keyframe_poses
-        ``world_T_base`` of the keyframes before and after optimisation.
+        ``world_T_base`` of the keyframes before and after optimisation (``K`` poses; index
+        ``n`` gives keyframe ``n``'s :class:`~coloradar.geometry.SE3`); None without keyframes.
     loops
         Every verified candidate (accepted or not).
     map_points
@@ -73,8 +78,8 @@ class SlamResult:
     odometry: Trajectory
     trajectory: Trajectory
     keyframes: np.ndarray
-    keyframe_odometry: list[SE3]
-    keyframe_poses: list[SE3]
+    keyframe_odometry: Trajectory | None
+    keyframe_poses: Trajectory | None
     loops: list[LoopRecord]
     map_points: np.ndarray
     frontend: FrontEnd
@@ -86,66 +91,98 @@ class SlamResult:
         return [lp for lp in self.loops if lp.accepted]
 
 
-def correct_frames(odometry: Trajectory, keyframes: np.ndarray, before: list[SE3],
-                   after: list[SE3]) -> Trajectory:
+def keyframe_trajectory(times: np.ndarray, poses: list[SE3], name: str) -> Trajectory:
+    """The keyframes' poses as one :class:`~coloradar.geometry.Trajectory` (arrays: about
+    60 bytes a keyframe, not a Python object per pose)."""
+    m = np.array([p.matrix() for p in poses]).reshape(-1, 4, 4)
+    return Trajectory(times, m[:, :3, 3], Rotation.from_matrix(m[:, :3, :3]), name=name)
+
+
+def correct_frames(odometry: Trajectory, keyframes: np.ndarray, before: Trajectory,
+                   after: Trajectory, block: int = 4096) -> Trajectory:
     """Every frame's pose: the odometry's, times the keyframes' world-side correction
     ``C_k = after_k · before_k⁻¹``, interpolated in time between keyframes (rotation by slerp,
-    translation linearly) and held before the first and after the last."""
+    translation linearly) and held before the first and after the last (computed ``block``
+    frames at a time, so that the temporaries do not grow with the run)."""
     t = odometry.timestamps
     if keyframes.size == 0:
         return odometry
-    corr = [a @ b.inverse() for a, b in zip(after, before, strict=True)]
+    rots = after.rotations * before.rotations.inv()
+    trans = after.translations - rots.apply(np.array(before.translations))
     tk = t[keyframes]
-    rots = Rotation.concatenate([c.rotation for c in corr])
-    trans = np.array([c.translation for c in corr])
-    tq = np.clip(t, tk[0], tk[-1])
-    if keyframes.size == 1:
-        r_c = Rotation.concatenate([rots[0]] * t.size)
-        t_c = np.repeat(trans, t.size, axis=0)
-    else:
-        r_c = Slerp(tk, rots)(tq)
-        t_c = np.stack([np.interp(tq, tk, trans[:, i]) for i in range(3)], axis=1)
-    new_r = r_c * odometry.rotations
-    new_t = r_c.apply(np.array(odometry.translations, dtype=np.float64)) + t_c
-    return Trajectory(t, new_t, new_r, name="slam")
+    slerp = Slerp(tk, rots) if keyframes.size > 1 else None
+    new_t = np.empty((t.size, 3))
+    new_q = np.empty((t.size, 4))
+    for lo in range(0, t.size, block):
+        sl = slice(lo, min(lo + block, t.size))
+        tq = np.clip(t[sl], tk[0], tk[-1])
+        if slerp is None:
+            r_c = Rotation.concatenate([rots[0]] * tq.size)
+            t_c = np.repeat(trans, tq.size, axis=0)
+        else:
+            r_c = slerp(tq)
+            t_c = np.stack([np.interp(tq, tk, trans[:, i]) for i in range(3)], axis=1)
+        new_q[sl] = (r_c * odometry.rotations[sl]).as_quat()
+        new_t[sl] = r_c.apply(np.array(odometry.translations[sl], dtype=np.float64)) + t_c
+    return Trajectory(t, new_t, Rotation.from_quat(new_q), name="slam")
 
 
-def build_slam_map(submaps: list[Submap], poses: list[SE3], voxel: float, min_keyframes: int
-                   ) -> np.ndarray:
+def _voxel_key(pts: np.ndarray, voxel: float) -> np.ndarray:
+    """int64 key of each point's voxel (21 bits per axis, ±157 km at 0.15 m), ordered as the
+    lexicographic order of the voxel indices."""
+    idx = np.floor(pts / voxel).astype(np.int64) + (1 << 20)
+    return (idx[:, 0] << 42) | (idx[:, 1] << 21) | idx[:, 2]
+
+
+def build_slam_map(submaps: Submaps, poses: Trajectory | list[SE3], voxel: float,
+                   min_keyframes: int, chunk: int = 32) -> np.ndarray:
     """float32 ``(N, 5)`` ``x y z count intensity``: the voxels (edge ``voxel`` [m]) into which
     at least ``min_keyframes`` submaps put a point, their centroid, that count and the mean
-    intensity, from the keyframes' ``poses``."""
-    xyz, inten, kf = [], [], []
-    for n, (s, p) in enumerate(zip(submaps, poses, strict=True)):
-        if s.points.shape[0]:
-            xyz.append(p.apply(s.points))
-            inten.append(s.intensity.astype(np.float64))
-            kf.append(np.full(s.points.shape[0], n, dtype=np.int64))
-    if not xyz:
+    intensity, from the keyframes' ``poses``.
+
+    The sums are accumulated ``chunk`` submaps at a time, so that memory holds the map's
+    voxels (bounded by the area covered, not the run's length) and one chunk.
+    """
+    keys = np.zeros(0, np.int64)
+    sums = np.zeros((0, 6))                   # Σx Σy Σz, points, Σ intensity, keyframes
+    for lo in range(0, len(poses), chunk):
+        xyz, inten, kf = [], [], []
+        for n in range(lo, min(lo + chunk, len(poses))):
+            s = submaps[n]
+            if s.points.shape[0]:
+                xyz.append(poses[n].apply(s.points))
+                inten.append(s.intensity.astype(np.float64))
+                kf.append(np.full(s.points.shape[0], n, dtype=np.int64))
+        if not xyz:
+            continue
+        pts = np.concatenate(xyz)
+        k = _voxel_key(pts, voxel)
+        # One row per (voxel, keyframe) pair: each counts one keyframe for its voxel.
+        pair_keys, pair = np.unique(np.stack([k, np.concatenate(kf)], axis=1), axis=0,
+                                    return_inverse=True)
+        pair = pair.reshape(-1)
+        rows = np.column_stack([np.bincount(pair, weights=c, minlength=pair_keys.shape[0])
+                                for c in (*pts.T, np.ones(pts.shape[0]), np.concatenate(inten))])
+        rows = np.column_stack([rows, np.ones(pair_keys.shape[0])])
+        keys, inv = np.unique(np.concatenate([keys, pair_keys[:, 0]]), return_inverse=True)
+        allrows = np.concatenate([sums, rows])
+        sums = np.column_stack([np.bincount(inv.reshape(-1), weights=allrows[:, c],
+                                            minlength=keys.size) for c in range(6)])
+    if keys.size == 0:
         return np.zeros((0, 5), dtype=np.float32)
-    pts, it, ks = np.concatenate(xyz), np.concatenate(inten), np.concatenate(kf)
-    keys = np.floor(pts / voxel).astype(np.int64)
-    _, vox = np.unique(keys, axis=0, return_inverse=True)
-    vox = vox.reshape(-1)
-    m = int(vox.max()) + 1
-    # Distinct keyframes per voxel: count the unique (voxel, keyframe) pairs.
-    pair = np.unique(vox * (len(submaps) + 1) + ks)
-    seen = np.bincount(pair // (len(submaps) + 1), minlength=m)
-    cnt = np.bincount(vox, minlength=m).astype(np.float64)
-    cols = [np.bincount(vox, weights=pts[:, i], minlength=m) / cnt for i in range(3)]
-    out = np.column_stack([*cols, seen, np.bincount(vox, weights=it, minlength=m) / cnt])
-    return out[seen >= min_keyframes].astype(np.float32)
+    cnt = sums[:, 3]
+    out = np.column_stack([sums[:, :3] / cnt[:, None], sums[:, 5], sums[:, 4] / cnt])
+    return out[sums[:, 5] >= min_keyframes].astype(np.float32)
 
 
-def _odometry_edges(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings
-                    ) -> list[Edge]:
+def _odometry_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings) -> list[Edge]:
     fl_t, fl_r = s.odometry_floor_translation, np.radians(s.odometry_floor_rotation_deg)
-    traj = fe.trajectory
+    traj, kfs = fe.trajectory, fe.keyframes
     edges = []
     for n in range(1, kfs.size):
         a, b = int(kfs[n - 1]), int(kfs[n])
         rel = traj[a].inverse() @ traj[b]
-        cov = relative_covariance(fe, a, b, fl_t, fl_r)
+        cov = relative_covariance(fe, n - 1, n, fl_t, fl_r, scale=s.odometry_cov_scale)
         edges.append(Edge(n - 1, n, rel, cov, "odometry"))
         if s.refine_odometry:
             reg = register(submaps[n - 1], submaps[n], rel, s)
@@ -158,21 +195,92 @@ def _odometry_edges(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: Sla
     return edges
 
 
-def _loops(fe: FrontEnd, kfs: np.ndarray, submaps: list[Submap], s: SlamSettings,
-           planar: bool) -> list[LoopRecord]:
-    traj = fe.trajectory
+def _loops(fe: FrontEnd, submaps: SubmapStore, s: SlamSettings, planar: bool
+           ) -> list[LoopRecord]:
+    traj, kfs = fe.trajectory, fe.keyframes
     pos = traj.translations[kfs]
     path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pos, axis=0), axis=1))])
     fl_t, fl_r = s.odometry_floor_translation, np.radians(s.odometry_floor_rotation_deg)
-    cov_p = fe.covariance[kfs, :3, :3]
+    cov_p = fe.covariance[:, :3, :3]
     out = []
     for j in range(kfs.size):
-        for c in loop_candidates(j, pos, path, cov_p, submaps, s):
+        for c in loop_candidates(j, pos, path, cov_p, submaps.descriptor, s):
             a, b = int(kfs[c.i]), int(kfs[c.j])
             rel = traj[a].inverse() @ traj[b]
-            cov = relative_covariance(fe, a, b, fl_t, fl_r, steps=c.j - c.i)
+            cov = relative_covariance(fe, c.i, c.j, fl_t, fl_r, steps=c.j - c.i,
+                                      scale=s.odometry_cov_scale)
             out.append(verify_loop(c, submaps, rel, cov, s, planar))
     return out
+
+
+def _optimise(fe: FrontEnd, submaps: Submaps, s: SlamSettings, records: list[LoopRecord]
+              ) -> tuple[list[LoopRecord], Trajectory]:
+    """Step 6: the pose graph of the odometry edges and the accepted loops, optimised with its
+    consistency test; the records of the loops it dropped say so."""
+    edges = _odometry_edges(fe, submaps, s)
+    loop_edges = [Edge(r.i, r.j, r.measured, r.covariance, "loop") for r in records
+                  if r.accepted and r.measured is not None and r.covariance is not None]
+    kfs = fe.keyframes
+    graph = PoseGraph([fe.trajectory[int(k)] for k in kfs], edges + loop_edges,
+                      robust_kernel=s.robust_kernel)
+    after, active = optimize_with_consistency(graph, s.gate_probability)
+    dropped = {(e.i, e.j) for e, a in zip(graph.edges, active, strict=True)
+               if e.kind == "loop" and not a}
+    records = [LoopRecord(**{**r.__dict__, "accepted": False,
+                             "reason": "inconsistent with the other loops and the odometry"})
+               if r.accepted and (r.i, r.j) in dropped else r for r in records]
+    return records, keyframe_trajectory(fe.trajectory.timestamps[kfs], after, "slam keyframes")
+
+
+def _frontend_and_submaps(clouds: Iterable[np.ndarray], timestamps: np.ndarray,
+                          calib: Calibration, imu: tuple[np.ndarray, np.ndarray], radar: str,
+                          fs: FrontEndSettings, s: SlamSettings, groundtruth: Trajectory | None,
+                          tm: dict[str, float]) -> tuple[FrontEnd, SubmapStore]:
+    """Steps 1–3: the front end and the keyframes' submaps (in a :class:`SubmapStore`);
+    each frame's static points wait on disk meanwhile, and what the filter returns is
+    reduced to a :class:`FrontEnd` at once."""
+    ego_config, rio_config = fs.ego_velocity, fs.filter or RioConfig()
+    thr = s.static_threshold if s.static_threshold is not None else ego_config.threshold
+    t0 = time.perf_counter()
+    store = FrameStore()
+    submaps = SubmapStore((s.descriptor_rings, s.descriptor_sectors))
+    try:
+        def keep(k, cloud, est):
+            v = est.velocity if est.ok else np.full(3, np.nan)
+            store.append(cloud, static_mask(cloud, v, thr, s.min_range, s.max_range))
+
+        track, still = estimate_track(clouds, timestamps, ego_config, seed=fs.seed, frame=radar,
+                                      on_frame=keep, zero_velocity=rio_config.zero_velocity)
+        _lap("ego_velocity", t0, tm)
+        dist, ang = s.keyframe_distance, np.radians(s.keyframe_angle_deg)
+        fe = radar_inertial_frontend(
+            track, still, calib, imu[0], imu[1], radar=radar, groundtruth=groundtruth,
+            config=rio_config, keyframes=lambda traj, ok: select_keyframes(traj, ok, dist, ang),
+            points=store.clouds())
+        del track, still
+        _lap("filter", t0, tm)
+        acc = point_accuracy(calib.radar(radar), s)
+        b_T_r = sensor_to_base(calib, radar)
+        for k in fe.keyframes:
+            submaps.append(build_submap(int(k), fe.trajectory, store, b_T_r, acc, s, fe.frames))
+    except BaseException:
+        submaps.close()
+        raise
+    finally:
+        store.close()
+    _lap("submaps", t0, tm)
+    return fe, submaps
+
+
+def _lap(stage: str, t0: float, tm: dict[str, float]) -> None:
+    """``tm[stage]``: seconds since ``t0`` not yet in ``tm`` (the stage just ended); with
+    ``tracemalloc`` tracing, also ``tm['peak_mb_' + stage]``: the stage's peak of traced
+    memory [MB] (what :mod:`benchmarks.bench_slam` reports)."""
+    spent = sum(v for k, v in tm.items() if not k.startswith("peak_mb_"))
+    tm[stage] = time.perf_counter() - t0 - spent
+    if tracemalloc.is_tracing():
+        tm["peak_mb_" + stage] = tracemalloc.get_traced_memory()[1] / 2**20
+        tracemalloc.reset_peak()
 
 
 def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib: Calibration,
@@ -186,7 +294,7 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
     ----------
     clouds
         float ``(N_k, 5)`` ``x y z intensity range_rate`` (radar frame), one per timestamp,
-        read once (an iterator is fine: only each frame's static points are kept, on disk).
+        read once (an iterator is fine: each frame is kept on disk, not in memory).
     timestamps
         float64 ``(M,)``: the frames' stamps [s].
     calib
@@ -209,49 +317,22 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
     """
     s = settings or SlamSettings()
     fs = frontend if isinstance(frontend, FrontEndSettings) else FrontEndSettings(frontend)
-    ego_config, rio_config = fs.ego_velocity, fs.filter or RioConfig()
-    thr = s.static_threshold if s.static_threshold is not None else ego_config.threshold
     tm: dict[str, float] = {}
     t0 = time.perf_counter()
-    store = FrameStore()
+    fe, submaps = _frontend_and_submaps(clouds, timestamps, calib, (imu_timestamps, imu_data),
+                                        radar, fs, s, groundtruth, tm)
     try:
-        def keep(k, cloud, est):
-            v = est.velocity if est.ok else np.full(3, np.nan)
-            store.append(static_points(cloud, v, thr, s.min_range, s.max_range))
-
-        track, still = estimate_track(clouds, timestamps, ego_config, seed=fs.seed, frame=radar,
-                                      on_frame=keep, zero_velocity=rio_config.zero_velocity)
-        tm["ego_velocity"] = time.perf_counter() - t0
-        fe = radar_inertial_frontend(track, still, calib, imu_timestamps, imu_data, radar=radar,
-                                     groundtruth=groundtruth, config=rio_config)
-        tm["filter"] = time.perf_counter() - t0 - sum(tm.values())
-        traj = fe.trajectory
-        kfs = select_keyframes(traj, fe.ok, s.keyframe_distance, np.radians(s.keyframe_angle_deg))
-        acc = point_accuracy(calib.radar(radar), s)
-        b_T_r = sensor_to_base(calib, radar)
-        submaps = [build_submap(int(k), traj, store, b_T_r, acc, s, fe.frames) for k in kfs]
+        odo, kfs = fe.trajectory, fe.keyframes
+        if kfs.size == 0:
+            return SlamResult(odo, odo, kfs, None, None, [], np.zeros((0, 5), np.float32),
+                              fe, np.zeros(0, np.int64), tm)
+        records = _loops(fe, submaps, s, elevation_rows(calib.radar(radar)) < 3)
+        _lap("loops", t0, tm)
+        records, after = _optimise(fe, submaps, s, records)
+        _lap("graph", t0, tm)
+        out = correct_frames(fe.trajectory, kfs, fe.trajectory[kfs], after)
+        m = build_slam_map(submaps, after, s.map_voxel, s.map_min_keyframes)
+        _lap("map", t0, tm)
+        return SlamResult(odo, out, kfs, odo[kfs], after, records, m, fe, submaps.sizes(), tm)
     finally:
-        store.close()
-    tm["submaps"] = time.perf_counter() - t0 - sum(tm.values())
-    before = [traj[int(k)] for k in kfs]
-    if kfs.size == 0:
-        return SlamResult(traj, traj, kfs, before, before, [], np.zeros((0, 5), np.float32), fe,
-                          np.zeros(0, np.int64), tm)
-    edges = _odometry_edges(fe, kfs, submaps, s)
-    records = _loops(fe, kfs, submaps, s, elevation_rows(calib.radar(radar)) < 3)
-    tm["loops"] = time.perf_counter() - t0 - sum(tm.values())
-    loop_edges = [Edge(r.i, r.j, r.measured, r.covariance, "loop") for r in records
-                  if r.accepted and r.measured is not None and r.covariance is not None]
-    graph = PoseGraph(before, edges + loop_edges, robust_kernel=s.robust_kernel)
-    after, active = optimize_with_consistency(graph, s.gate_probability)
-    dropped = {(e.i, e.j) for e, a in zip(graph.edges, active, strict=True)
-               if e.kind == "loop" and not a}
-    records = [LoopRecord(**{**r.__dict__, "accepted": False,
-                             "reason": "inconsistent with the other loops and the odometry"})
-               if r.accepted and (r.i, r.j) in dropped else r for r in records]
-    tm["graph"] = time.perf_counter() - t0 - sum(tm.values())
-    out = correct_frames(traj, kfs, before, after)
-    m = build_slam_map(submaps, after, s.map_voxel, s.map_min_keyframes)
-    tm["map"] = time.perf_counter() - t0 - sum(tm.values())
-    return SlamResult(traj, out, kfs, before, after, records, m, fe,
-                      np.array([sm.points.shape[0] for sm in submaps], dtype=np.int64), tm)
+        submaps.close()
