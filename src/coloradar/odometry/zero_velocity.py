@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames", "still_world"]
+__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames", "still_rates", "still_world"]
 
 
 @dataclass(frozen=True)
@@ -39,6 +39,10 @@ class ZeroVelocityConfig:
     still_rate, still_fraction, still_min_points
         :func:`still_world`: a cloud of at least ``still_min_points`` points of which
         ``still_fraction`` have ``|range rate| < still_rate`` [m/s] shows a still world.
+    still_sigmas, still_point_fraction
+        :func:`still_rates` (the filter's own test when it is given the points): at least
+        ``still_min_points`` points and ``still_point_fraction`` of them within
+        ``still_sigmas`` Doppler standard deviations of zero.
     """
 
     max_speed: float = 0.03
@@ -48,6 +52,8 @@ class ZeroVelocityConfig:
     still_rate: float = 0.05
     still_fraction: float = 0.8
     still_min_points: int = 3
+    still_sigmas: float = 3.0
+    still_point_fraction: float = 0.6
 
 
 def still_world(cloud: np.ndarray, config: ZeroVelocityConfig | None = None,
@@ -73,6 +79,36 @@ def still_world(cloud: np.ndarray, config: ZeroVelocityConfig | None = None,
     if n < cfg.still_min_points:
         return False
     return bool(np.mean(np.abs(rr[use]) < cfg.still_rate) >= cfg.still_fraction)
+
+
+def still_rates(rates: np.ndarray, range_rate_std: float,
+                config: ZeroVelocityConfig | None = None) -> bool:
+    """Whether a frame's range rates show a still world, judged against the radar's Doppler
+    noise: at least ``still_min_points`` points, and ``still_point_fraction`` of them with
+    ``|range rate| <= still_sigmas · range_rate_std``.
+
+    The fixed ``still_rate`` of :func:`still_world` (5 cm/s) is below the Doppler noise of a
+    sparse single-chip cloud (3–8 cm/s): at rest a third of its points fall outside it and
+    the rest goes unseen. Relative to the noise, a rig at rest keeps ≥ 99 % of its static
+    points (3σ) and the ghosts that happen to be slow, while one moving at ``s`` keeps only
+    the points more than ``acos(3σ/s)`` off its motion: few in a forward field of view once
+    ``s`` exceeds about 6σ (slower motion is for :func:`imu_quiet` to reject). Ghosts and
+    movers (≤ 20–30 % of a cloud) stay below ``1 − still_point_fraction``.
+
+    Parameters
+    ----------
+    rates
+        float ``(K,)``: the range rates of the frame's usable points [m/s].
+    range_rate_std
+        The radar's Doppler error [m/s] (:class:`~coloradar.odometry.doppler.PointNoise`).
+    """
+    cfg = config or ZeroVelocityConfig()
+    rr = np.asarray(rates, dtype=np.float64)
+    rr = rr[np.isfinite(rr)]
+    if rr.size < max(cfg.still_min_points, 1):
+        return False
+    return bool(np.mean(np.abs(rr) <= cfg.still_sigmas * range_rate_std)
+                >= cfg.still_point_fraction)
 
 
 def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np.ndarray,
