@@ -3,7 +3,8 @@
 :func:`rio_odometry` runs the whole chain on one run's data:
 
 1. **Zero-velocity detection** (:mod:`.zero_velocity`) at every radar frame, from the radar's
-   ego-speed and the IMU's quietness; nobody says when the rig stands still.
+   ego-speed (or, given the points, their range rates against the Doppler noise) and the
+   IMU's quietness; nobody says when the rig stands still.
 2. **Initialisation** at the first usable radar frame: attitude from gravity
    (:mod:`.gravity`; motion removed with the radar's velocities when the rig already moves),
    gyro bias from the mean rate when that frame is static, velocity from the radar; a moving
@@ -12,8 +13,9 @@
 3. **Propagation** with every IMU sample (:meth:`.ErrorStateEKF.propagate`).
 4. **Updates**, in time order over all radars (the order of the frames' IMU times
    ``stamp + t_d[r]`` under the current offsets): a static frame gives a zero-velocity update
-   (``v = 0``, σ ``zupt_std``) and a zero-rate update of the gyro bias (the mean rate of the IMU
-   samples since the previous one); any other usable frame gives a radar velocity update,
+   (``v = 0``, σ ``zupt_std``) and, when that is accepted, an ungated zero-rate update of the
+   gyro bias (the mean rate of the IMU samples since the previous one); any other usable frame
+   gives a radar velocity update,
    ``z = v_radar`` (RANSAC ego-velocity, :mod:`.ego_velocity`), covariance the RANSAC one
    times ``velocity_noise_scale²`` plus ``velocity_noise_floor²`` (the RANSAC covariance has
    the right shape but leaves out angle and Doppler-bin errors),

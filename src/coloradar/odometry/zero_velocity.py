@@ -4,7 +4,8 @@ Nobody tells the filter when the rig stands still. A radar frame is declared *st
 
 - its ego-velocity is usable and slower than ``max_speed``, or its cloud shows a still world
   (:func:`still_world`: most points at zero range rate; this needs no ego-velocity, so it
-  holds for the sparse clouds of a radar at rest too), and
+  holds for the sparse clouds of a radar at rest too; :func:`still_rates` judges the range
+  rates against the radar's own Doppler noise, the filter's test when it has the points), and
 - over ``window`` seconds around it the IMU is quiet: the per-axis standard deviation of the
   angular rate is below ``max_gyro_std`` and that of the specific force below
   ``max_accel_std`` (a rig moving at constant velocity would pass the radar test only at zero
