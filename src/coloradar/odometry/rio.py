@@ -419,7 +419,7 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
         if pts is not None:
             # The points' own range rates against the radar's Doppler noise: a sparse cloud's
             # RANSAC speed at rest is often above max_speed, and its rest would go unseen.
-            own = np.array([still_rates(p[:, 3], noises[r].range_rate_std, zv)
+            own = np.array([still_rates(p, noises[r].range_rate_std, zv)
                             for p, _, _ in pts[r]], dtype=bool)
             st = own if st is None else st | own
         static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv, st))
@@ -574,12 +574,16 @@ class _Loop:
             self._release_calibration(r, tau)
             st = self.stats[s.names[r]]
             used = None
-            if s.pts is not None and not s.static[r][k] and s.pts[r][k][0].shape[0]:
+            # A frame found static whose zero-velocity update the filter rejects (a rig
+            # creeping slower than the still test resolves, with a quiet IMU) is not lost: it
+            # updates as a moving frame does.
+            still = bool(s.static[r][k]) and self._zero_velocity(tau, st)
+            if s.pts is not None and not still and s.pts[r][k][0].shape[0]:
                 used = doppler_update(ekf, r, s.t_ir[r], s.pts[r][k][0], s.noises[r],
                                       s.dcfg[r], min(want - tau, 0.0), s.cfg.planar_vz_std)
                 st["points"] += s.pts[r][k][0].shape[0]
-            if s.static[r][k]:
-                self._zero_velocity(tau, st)
+            if still:
+                pass
             elif used is not None:
                 st["updates"] += 1
                 st["point_updates"] += 1
@@ -610,8 +614,9 @@ class _Loop:
             ekf.P[sl, sl] = np.diag(self.P0[sl])
             self.ext_on[r] = True
 
-    def _zero_velocity(self, tau: float, st: dict[str, int]) -> None:
-        """A static frame: zero-velocity update and zero-rate update of the gyro bias."""
+    def _zero_velocity(self, tau: float, st: dict[str, int]) -> bool:
+        """A static frame: zero-velocity update and zero-rate update of the gyro bias; returns
+        whether the zero-velocity update was accepted."""
         s, ekf, cfg = self.s, self.s.ekf, self.s.cfg
         H = np.zeros((3, ekf.dim))
         H[:, V] = np.eye(3)
@@ -633,6 +638,7 @@ class _Loop:
             ekf.update(z - ekf.bg, Hg, Rg, None)
         self.last_zaru = tau
         st["zupts" if acc else "rejected"] += 1
+        return bool(acc)
 
     def _ego_velocity(self, r: int, k: int, want: float, tau: float,
                       st: dict[str, int]) -> None:
