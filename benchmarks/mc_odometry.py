@@ -23,8 +23,9 @@ reference of what the radar alone carries). Figures: ATE (SE(3)-aligned RMSE) an
 error (first poses put on the truth's) as % of the distance; and, for the filter, the mean
 NEES of position, velocity and attitude per degree of freedom over the output poses.
 
-Seeds: reported runs use ``--seed0`` 0 (runs 0..N−1); choices were made on the tuning runs
-(``--tuning``: seeds 1001–1016, 90 s; never reported). ``--imu-prior 2 5`` runs the filter
+Seeds: reported runs use ``--seed0`` 0 (runs 0..N−1; 3–10 s runs ``--seed0 500 --duration 3
+10``); choices were made on the tuning runs (``--tuning``: seeds 1001–1016, 90 s; 3–10 s:
+``--seed0 600 --duration 3 10``; never reported). ``--imu-prior 2 5`` runs the filter
 with twice the turn-on bias std and five times the bias walks (docs/odometry.md).
 Runs are cached under ``/tmp/coloradar_mc`` (``--cache``).
 """

@@ -121,11 +121,6 @@ class DopplerConfig:
         the direction noise, which the filter does not know exactly.
     min_range
         Points closer than this are left out [m] (the rig, antenna leakage).
-    planar_vz_std
-        With ``planar``: also the planar model's ``v_z ≈ 0`` (radar frame) with this
-        standard deviation [m/s] (None: ``v_z`` from the IMU alone, which drifts). 5 cm/s:
-        on the tuning runs 2, 5 and 10 cm/s gave median final errors of 0.18, 0.22 and
-        0.30 % and 0.05 the smaller worst case of the two best.
     noise_uncertainty
         Variance, in units of the correction's change when the angle variances double, of
         the errors-in-variables correction's own error (the direction noise is not known
@@ -139,7 +134,6 @@ class DopplerConfig:
     planar: bool | None = None
     min_range: float = 0.3
     noise_uncertainty: float = 1.0
-    planar_vz_std: float | None = 0.05
 
     def __post_init__(self) -> None:
         if not 0 < self.gate_probability < 1:
@@ -349,8 +343,8 @@ def solve_points(u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray
 
 
 def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndarray,
-                   noise: PointNoise, config: DopplerConfig, shift: float = 0.0
-                   ) -> np.ndarray | None:
+                   noise: PointNoise, config: DopplerConfig, shift: float = 0.0,
+                   planar_vz_std: float | None = None) -> np.ndarray | None:
     """Update the filter with one frame's Doppler points of radar ``r``.
 
     Parameters
@@ -366,6 +360,10 @@ def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndar
     shift
         The frame's time minus the filter's [s] (≤ 0: a frame whose time has passed is
         predicted to first order along the time-offset column).
+    planar_vz_std
+        With ``config.planar``: also the planar model's ``v_z ≈ 0`` (radar frame) with this
+        standard deviation [m/s] (:attr:`~coloradar.odometry.rio.RioConfig.planar_vz_std`);
+        None: ``v_z`` from the IMU alone, which drifts.
 
     Returns
     -------
@@ -381,12 +379,12 @@ def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndar
     if sol is None:
         return None
     basis, value, cov = sol.basis, sol.value, sol.covariance
-    if config.planar and config.planar_vz_std:
+    if config.planar and planar_vz_std:
         # The planar model's assumption, held loosely: the radar's v_z is about 0.
         basis = np.vstack([basis, [0.0, 0.0, 1.0]])
         value = np.append(value, 0.0)
         k = cov.shape[0]
         cov = np.pad(cov, ((0, 1), (0, 1)))
-        cov[k, k] = config.planar_vz_std**2
+        cov[k, k] = planar_vz_std**2
     ekf.update(value - basis @ y, basis @ H, cov, None)
     return sol.accepted

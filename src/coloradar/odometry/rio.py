@@ -3,7 +3,8 @@
 :func:`rio_odometry` runs the whole chain on one run's data:
 
 1. **Zero-velocity detection** (:mod:`.zero_velocity`) at every radar frame, from the radar's
-   ego-speed and the IMU's quietness; nobody says when the rig stands still.
+   ego-speed (or, given the points, their range rates against the Doppler noise) and the
+   IMU's quietness; nobody says when the rig stands still.
 2. **Initialisation** at the first usable radar frame: attitude from gravity
    (:mod:`.gravity`; motion removed with the radar's velocities when the rig already moves),
    gyro bias from the mean rate when that frame is static, velocity from the radar; a moving
@@ -12,8 +13,9 @@
 3. **Propagation** with every IMU sample (:meth:`.ErrorStateEKF.propagate`).
 4. **Updates**, in time order over all radars (the order of the frames' IMU times
    ``stamp + t_d[r]`` under the current offsets): a static frame gives a zero-velocity update
-   (``v = 0``, σ ``zupt_std``) and a zero-rate update of the gyro bias (the mean rate of the IMU
-   samples since the previous one); any other usable frame gives a radar velocity update,
+   (``v = 0``, σ ``zupt_std``) and, when that is accepted, an ungated zero-rate update of the
+   gyro bias (the mean rate of the IMU samples since the previous one); any other usable frame
+   gives a radar velocity update,
    ``z = v_radar`` (RANSAC ego-velocity, :mod:`.ego_velocity`), covariance the RANSAC one
    times ``velocity_noise_scale²`` plus ``velocity_noise_floor²`` (the RANSAC covariance has
    the right shape but leaves out angle and Doppler-bin errors),
@@ -43,7 +45,7 @@ from .doppler import DopplerConfig, PointNoise, doppler_points_index, doppler_up
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
 from .velocity_track import EgoVelocityTrack
-from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames
+from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames, still_rates
 
 __all__ = ["UPDATES", "RioConfig", "RioResult", "rio_odometry", "rio_summary"]
 
@@ -108,8 +110,12 @@ class RioConfig:
     zero_velocity
         The zero-velocity detector's settings.
     planar_vz_std
-        A planar ego-velocity (``v_z`` fixed at 0, the single chip's) updates ``v_z`` with
-        this standard deviation [m/s]: the planar model's own assumption, held loosely.
+        A planar radar (``v_z`` fixed at 0, the single chip's) updates its own ``v_z`` with
+        this standard deviation [m/s]: the planar model's assumption, held loosely, in either
+        update (the Doppler points' and the ego-velocity's). 5 cm/s: on the tuning runs of
+        ``benchmarks/mc_odometry.py`` 2, 5 and 10 cm/s gave the Doppler update median final
+        errors of 0.18, 0.22 and 0.30 % and 5 cm/s the smaller worst case of the two best;
+        the ego-velocity update, which had 10 cm/s, is no worse with it (docs/odometry.md).
     zupt_std
         Standard deviation of a zero-velocity update [m/s].
     align_window
@@ -156,7 +162,7 @@ class RioConfig:
     estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
-    planar_vz_std: float = 0.1
+    planar_vz_std: float = 0.05
     zupt_std: float = 0.005
     align_window: float = 0.5
     moving_tilt_std: float = 3.0 * _DEG
@@ -409,8 +415,14 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
     static = []
     for r, tr in enumerate(tr_list):
         quiet = imu_quiet(imu_t, imu_d[:, :3], imu_d[:, 3:], tr.timestamps + cfg.time_offset, zv)
-        static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv,
-                                    None if still is None else still[r]))
+        st = None if still is None else np.asarray(still[r], dtype=bool)
+        if pts is not None:
+            # The points' own range rates against the radar's Doppler noise: a sparse cloud's
+            # RANSAC speed at rest is often above max_speed, and its rest would go unseen.
+            own = np.array([still_rates(p, noises[r].range_rate_std, zv)
+                            for p, _, _ in pts[r]], dtype=bool)
+            st = own if st is None else st | own
+        static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv, st))
     return _Setup(cfg, tr_list, names, imu_t, imu_d, ekf, base_T_imu.inverse(), ext,
                   [e.translation for e in ext], planar, pts, noises, dcfg, ext_planar, static)
 
@@ -562,12 +574,16 @@ class _Loop:
             self._release_calibration(r, tau)
             st = self.stats[s.names[r]]
             used = None
-            if s.pts is not None and not s.static[r][k] and s.pts[r][k][0].shape[0]:
+            # A frame found static whose zero-velocity update the filter rejects (a rig
+            # creeping slower than the still test resolves, with a quiet IMU) is not lost: it
+            # updates as a moving frame does.
+            still = bool(s.static[r][k]) and self._zero_velocity(tau, st)
+            if s.pts is not None and not still and s.pts[r][k][0].shape[0]:
                 used = doppler_update(ekf, r, s.t_ir[r], s.pts[r][k][0], s.noises[r],
-                                      s.dcfg[r], min(want - tau, 0.0))
+                                      s.dcfg[r], min(want - tau, 0.0), s.cfg.planar_vz_std)
                 st["points"] += s.pts[r][k][0].shape[0]
-            if s.static[r][k]:
-                self._zero_velocity(tau, st)
+            if still:
+                pass
             elif used is not None:
                 st["updates"] += 1
                 st["point_updates"] += 1
@@ -598,15 +614,16 @@ class _Loop:
             ekf.P[sl, sl] = np.diag(self.P0[sl])
             self.ext_on[r] = True
 
-    def _zero_velocity(self, tau: float, st: dict[str, int]) -> None:
-        """A static frame: zero-velocity update and zero-rate update of the gyro bias."""
+    def _zero_velocity(self, tau: float, st: dict[str, int]) -> bool:
+        """A static frame: zero-velocity update and zero-rate update of the gyro bias; returns
+        whether the zero-velocity update was accepted."""
         s, ekf, cfg = self.s, self.s.ekf, self.s.cfg
         H = np.zeros((3, ekf.dim))
         H[:, V] = np.eye(3)
         acc, _ = ekf.update(-ekf.v, H, np.eye(3) * cfg.zupt_std**2, self.gate3)
         self.rejected_run = 0 if acc else self.rejected_run
         sel = (s.imu_t > self.last_zaru) & (s.imu_t <= tau)
-        if sel.sum() >= 3:
+        if acc and sel.sum() >= 3:
             Hg = np.zeros((3, ekf.dim))
             Hg[:, BG] = np.eye(3)
             span = max(tau - self.last_zaru, 1e-3)
@@ -614,9 +631,14 @@ class _Loop:
             # The mean of white rate noise over `span` seconds, plus a floor for the rig's
             # residual motion.
             Rg = np.eye(3) * (cfg.gyro_noise_density**2 / span + (2e-4) ** 2)
-            ekf.update(z - ekf.bg, Hg, Rg, self.gate3)
+            # Not gated: the rest is established (radar still, IMU quiet, the zero-velocity
+            # update accepted), and a mean rate many prior σ from the bias estimate is the
+            # turn-on bias the prior underrates (up to 2x the datasheet's, issue 25), the
+            # one measurement that can correct it; gated, the rest would be thrown away.
+            ekf.update(z - ekf.bg, Hg, Rg, None)
         self.last_zaru = tau
         st["zupts" if acc else "rejected"] += 1
+        return bool(acc)
 
     def _ego_velocity(self, r: int, k: int, want: float, tau: float,
                       st: dict[str, int]) -> None:

@@ -4,7 +4,8 @@ Nobody tells the filter when the rig stands still. A radar frame is declared *st
 
 - its ego-velocity is usable and slower than ``max_speed``, or its cloud shows a still world
   (:func:`still_world`: most points at zero range rate; this needs no ego-velocity, so it
-  holds for the sparse clouds of a radar at rest too), and
+  holds for the sparse clouds of a radar at rest too; :func:`still_rates` judges the range
+  rates against the radar's own Doppler noise, the filter's test when it has the points), and
 - over ``window`` seconds around it the IMU is quiet: the per-axis standard deviation of the
   angular rate is below ``max_gyro_std`` and that of the specific force below
   ``max_accel_std`` (a rig moving at constant velocity would pass the radar test only at zero
@@ -19,8 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
-__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames", "still_world"]
+__all__ = ["ZeroVelocityConfig", "imu_quiet", "static_frames", "still_rates", "still_world"]
 
 
 @dataclass(frozen=True)
@@ -39,6 +41,11 @@ class ZeroVelocityConfig:
     still_rate, still_fraction, still_min_points
         :func:`still_world`: a cloud of at least ``still_min_points`` points of which
         ``still_fraction`` have ``|range rate| < still_rate`` [m/s] shows a still world.
+    still_sigmas, still_point_fraction, still_probability
+        :func:`still_rates` (the filter's own test when it is given the points): at least
+        ``still_min_points`` points, ``still_point_fraction`` of them within ``still_sigmas``
+        Doppler standard deviations of zero, and zero velocity within the chi-square
+        quantile ``still_probability`` of the velocity those points fit.
     """
 
     max_speed: float = 0.03
@@ -48,6 +55,9 @@ class ZeroVelocityConfig:
     still_rate: float = 0.05
     still_fraction: float = 0.8
     still_min_points: int = 3
+    still_sigmas: float = 3.0
+    still_point_fraction: float = 0.6
+    still_probability: float = 0.999
 
 
 def still_world(cloud: np.ndarray, config: ZeroVelocityConfig | None = None,
@@ -73,6 +83,50 @@ def still_world(cloud: np.ndarray, config: ZeroVelocityConfig | None = None,
     if n < cfg.still_min_points:
         return False
     return bool(np.mean(np.abs(rr[use]) < cfg.still_rate) >= cfg.still_fraction)
+
+
+def still_rates(points: np.ndarray, range_rate_std: float,
+                config: ZeroVelocityConfig | None = None) -> bool:
+    """Whether a frame's Doppler points show a still world, judged against the radar's Doppler
+    noise ``σ``: at least ``still_min_points`` points, ``still_point_fraction`` of them with
+    ``|range rate| <= still_sigmas · σ``, and zero velocity consistent with those points
+    (``bᵀ A⁺ b / σ² <= χ²_k(still_probability)``, ``A = Σ u uᵀ``, ``b = Σ u ṙ``: the velocity
+    they fit, ``A⁺ b``, is no further from zero than their noise explains).
+
+    The fixed ``still_rate`` of :func:`still_world` (5 cm/s) is below the Doppler noise of a
+    sparse single-chip cloud (3–8 cm/s): at rest a third of its points fall outside it and
+    the rest goes unseen. Relative to the noise, a rig at rest keeps ≥ 99 % of its static
+    points (3σ) and the ghosts that happen to be slow, while one moving at ``s`` keeps only
+    the points more than ``acos(3σ/s)`` off its motion: few in a forward field of view once
+    ``s`` exceeds about 6σ. Slower motion, whose range rates all lie within the window, is
+    what the chi-square test catches (a rig creeping at 6 cm/s seen by 20 points of 5 cm/s
+    noise fits a velocity ≈ 4σ from zero), and :func:`imu_quiet` beside it. Ghosts and movers
+    (≤ 20–30 % of a cloud) stay below ``1 − still_point_fraction``.
+
+    Parameters
+    ----------
+    points
+        float ``(K, 4)``: unit directions and range rates ``ux uy uz ṙ`` of the frame's usable
+        points (:func:`~coloradar.odometry.doppler.doppler_points`) [-, m/s].
+    range_rate_std
+        The radar's Doppler error [m/s] (:class:`~coloradar.odometry.doppler.PointNoise`).
+    """
+    cfg = config or ZeroVelocityConfig()
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 4)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.shape[0] < max(cfg.still_min_points, 1):
+        return False
+    near = np.abs(p[:, 3]) <= cfg.still_sigmas * range_rate_std
+    if np.mean(near) < cfg.still_point_fraction:
+        return False
+    u, rr = p[near, :3], p[near, 3]
+    a = u.T @ u
+    b = u.T @ rr
+    lam, q = np.linalg.eigh(a)
+    keep = lam > 1e-9 * max(float(lam[-1]), 1e-300)
+    # bᵀ A⁺ b / σ² in A's eigenbasis: a direction no point observes adds nothing.
+    stat = float(np.sum((q[:, keep].T @ b) ** 2 / lam[keep])) / range_rate_std**2
+    return stat <= float(chi2.ppf(cfg.still_probability, int(keep.sum())))
 
 
 def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np.ndarray,
