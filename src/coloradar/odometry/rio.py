@@ -31,6 +31,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from typing import overload
 
 import numpy as np
 from scipy.integrate import trapezoid  # numpy.trapezoid needs numpy >= 2
@@ -300,11 +301,42 @@ def _default_noise(calib: Calibration, radar: str) -> PointNoise:
     return point_noise_for(radar, float(w.velocity_bin_width), float(w.max_velocity))
 
 
+class _FramePoints(Sequence[tuple[np.ndarray, np.ndarray, int]]):
+    """One radar's clouds as the filter reads them, frame ``k`` → the usable points ``(K, 4)``
+    (:func:`.doppler.doppler_points_index`), their rows in the cloud and the cloud's size.
+
+    Computed when asked (the last frame kept), not for the whole run at once: the clouds stay
+    wherever the caller keeps them — a list, or SLAM's frame store on disk — and memory does
+    not grow with the run's length."""
+
+    def __init__(self, clouds: Sequence[np.ndarray], min_range: float) -> None:
+        self.clouds, self.min_range = clouds, min_range
+        self._last: tuple[int, tuple[np.ndarray, np.ndarray, int]] | None = None
+
+    def __len__(self) -> int:
+        return len(self.clouds)
+
+    @overload
+    def __getitem__(self, k: int) -> tuple[np.ndarray, np.ndarray, int]: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[tuple[np.ndarray, np.ndarray, int]]: ...
+
+    def __getitem__(self, k: int | slice
+                    ) -> tuple[np.ndarray, np.ndarray, int] | list[tuple[np.ndarray, np.ndarray, int]]:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        if self._last is None or self._last[0] != k:
+            c = self.clouds[k]
+            self._last = (k, (*doppler_points_index(c, self.min_range), int(np.shape(c)[0])))
+        return self._last[1]
+
+
 def _prepare_points(points: Sequence[Sequence[np.ndarray]] | None,
                     tracks: Sequence[EgoVelocityTrack], cfg: RioConfig
-                    ) -> list[list[tuple[np.ndarray, np.ndarray, int]]] | None:
-    """Per radar, per frame: the usable points ``(K, 4)`` (:func:`.doppler.doppler_points`),
-    their rows in the cloud and the cloud's size; None when the update is loosely coupled."""
+                    ) -> list[_FramePoints] | None:
+    """Per radar, per frame: the usable points ``(K, 4)``, their rows in the cloud and the
+    cloud's size (:class:`_FramePoints`); None when the update is loosely coupled."""
     if points is None or cfg.update != "doppler":
         return None
     if len(points) != len(tracks):
@@ -313,8 +345,7 @@ def _prepare_points(points: Sequence[Sequence[np.ndarray]] | None,
     for tr, clouds in zip(tracks, points, strict=True):
         if len(clouds) != len(tr):
             raise SettingsError(f"{tr.frame}: {len(tr)} frames but {len(clouds)} point clouds")
-        out.append([(*doppler_points_index(c, cfg.doppler.min_range), int(np.shape(c)[0]))
-                    for c in clouds])
+        out.append(_FramePoints(clouds, cfg.doppler.min_range))
     return out
 
 
@@ -361,7 +392,7 @@ class _Setup:
     ext: list[SE3]
     t_ir: list[np.ndarray]
     planar: list[bool]
-    pts: list[list[tuple[np.ndarray, np.ndarray, int]]] | None
+    pts: list[_FramePoints] | None
     noises: tuple[PointNoise, ...]
     dcfg: list[DopplerConfig]
     ext_planar: list[bool]
@@ -375,7 +406,8 @@ def _check_imu(imu_timestamps: np.ndarray, imu_data: np.ndarray
     if imu.shape != (imu_t.size, 6):
         raise SettingsError(f"expected IMU data of shape ({imu_t.size}, 6), got {imu.shape}")
     good_imu = np.all(np.isfinite(imu), axis=1) & np.isfinite(imu_t)
-    imu_t, imu = imu_t[good_imu], imu[good_imu]
+    if not good_imu.all():          # a copy only when samples are left out
+        imu_t, imu = imu_t[good_imu], imu[good_imu]
     if imu_t.size < 10 or np.any(np.diff(imu_t) <= 0):
         raise ColoradarError("radar-inertial odometry needs an IMU stream of at least 10 "
                              "samples with strictly increasing timestamps")
@@ -395,7 +427,7 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
         raise SettingsError(f"{len(tr_list)} tracks but {len(names)} radar names")
     imu_t, imu_d = _check_imu(*imu)
     n_r = len(tr_list)
-    ekf = ErrorStateEKF(imu_t, imu_d[:, :3], imu_d[:, 3:], cfg.noise, n_r)
+    ekf = ErrorStateEKF.from_array(imu_t, imu_d, cfg.noise, n_r)
     base_T_imu = sensor_to_base(calib, "imu")
     ext = [base_T_imu.inverse() @ sensor_to_base(calib, n) for n in names]
     for r, e in enumerate(ext):

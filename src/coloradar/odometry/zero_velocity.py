@@ -133,25 +133,34 @@ def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np
               config: ZeroVelocityConfig) -> np.ndarray:
     """bool ``(M,)``: whether the IMU is quiet in the window around each of ``times``.
 
-    Per-window sums come from cumulative sums, so the cost is O(N + M) whatever the window.
+    Per-window sums come from cumulative sums, so the cost is O(N + M) whatever the window;
+    they are taken over the stretch of IMU that a block of ``times`` needs, so that the
+    temporaries stay the size of a block, not of the run.
     """
     t = np.asarray(imu_t, dtype=np.float64)
     times = np.asarray(times, dtype=np.float64)
     lo = np.searchsorted(t, times - config.window / 2)
     hi = np.searchsorted(t, times + config.window / 2)
     n = hi - lo
-    out = np.zeros(times.size, dtype=bool)
-    for data, limit in ((imu_w, config.max_gyro_std), (imu_f, config.max_accel_std)):
-        x = np.asarray(data, dtype=np.float64)
-        x = x - x.mean(axis=0)                      # better conditioned sums
-        c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(x, 0)])
-        c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(x * x, 0)])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            m1 = (c1[hi] - c1[lo]) / n[:, None]
-            var = (c2[hi] - c2[lo]) / n[:, None] - m1**2
-        ok = np.all(np.sqrt(np.maximum(var, 0.0)) < limit, axis=1)
-        out = ok if data is imu_w else out & ok
-    return out & (n >= 5)
+    out = n >= 5
+    block = 512
+    for b in range(0, times.size, block):
+        s = slice(b, b + block)
+        a, z = int(lo[s].min(initial=t.size)), int(hi[s].max(initial=0))
+        if z <= a:
+            out[s] = False
+            continue
+        for data, limit in ((imu_w, config.max_gyro_std), (imu_f, config.max_accel_std)):
+            x = np.asarray(data[a:z], dtype=np.float64)
+            x = x - x.mean(axis=0)                  # better conditioned sums
+            c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(x, 0)])
+            c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(x * x, 0)])
+            i, j = lo[s] - a, hi[s] - a
+            with np.errstate(invalid="ignore", divide="ignore"):
+                m1 = (c1[j] - c1[i]) / n[s, None]
+                var = (c2[j] - c2[i]) / n[s, None] - m1**2
+            out[s] &= np.all(np.sqrt(np.maximum(var, 0.0)) < limit, axis=1)
+    return out
 
 
 def static_frames(speeds: np.ndarray, ok: np.ndarray, quiet: np.ndarray,
