@@ -141,14 +141,15 @@ class CFARSettings:
         too (the demo's corridor: a third to two thirds fewer points, docs/dsp.md).
     cfar_range_floor
         Flatten the noise floor along range before the CFAR: every range bin's statistic is
-        divided by its floor (the lower quartile over Doppler, pooled with the two neighbouring
-        range bins) and the CFAR's noise estimate multiplied back. The receiver's noise is not
-        flat in range — the IF high-pass rises over the first bins and the anti-alias filter
-        rolls off over the last — and a training window that straddles such a step lowers the
-        threshold of the cells on its high side (OpenRadar's real frame: 4x the requested rate
-        at 1e-2 and 10x at 1e-3 on the cells before the roll-off, docs/capture.md). A quantile
-        over Doppler ignores the returns of a range bin unless they fill three quarters of it.
-        False: the CFAR sees the statistic as it is (the chain before issue 29).
+        divided by its floor (the lower quartile over Doppler, median-filtered along range:
+        :func:`coloradar.dsp.cfar.range_floor`) and the CFAR's noise estimate multiplied
+        back. The receiver's noise is not flat in range — the IF high-pass rises over the
+        first bins and the anti-alias filter rolls off over the last — and a training window
+        that straddles such a step lowers the threshold of the cells on its high side
+        (OpenRadar's real frame: 4x the requested rate at 1e-2 and 10x at 1e-3 on the cells
+        before the roll-off, docs/capture.md). A quantile over Doppler ignores the returns of
+        a range bin unless they fill three quarters of it. False: the CFAR sees the statistic
+        as it is (the chain before issue 29).
     min_range
         Detections closer than this [m] are dropped (coupling residue lives there).
     peak_grouping

@@ -31,7 +31,6 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import overload
 
 import numpy as np
 from scipy.integrate import trapezoid  # numpy.trapezoid needs numpy >= 2
@@ -301,13 +300,15 @@ def _default_noise(calib: Calibration, radar: str) -> PointNoise:
     return point_noise_for(radar, float(w.velocity_bin_width), float(w.max_velocity))
 
 
-class _FramePoints(Sequence[tuple[np.ndarray, np.ndarray, int]]):
+class _FramePoints:
     """One radar's clouds as the filter reads them, frame ``k`` → the usable points ``(K, 4)``
     (:func:`.doppler.doppler_points_index`), their rows in the cloud and the cloud's size.
 
     Computed when asked (the last frame kept), not for the whole run at once: the clouds stay
     wherever the caller keeps them — a list, or SLAM's frame store on disk — and memory does
-    not grow with the run's length."""
+    not grow with the run's length. The price: the set-up's rest test reads every frame once
+    and the filter once more (a pass is 1.4 % of the single chip's filter time: 15 ms of
+    1.05 s on a 90 s run)."""
 
     def __init__(self, clouds: Sequence[np.ndarray], min_range: float) -> None:
         self.clouds, self.min_range = clouds, min_range
@@ -316,20 +317,14 @@ class _FramePoints(Sequence[tuple[np.ndarray, np.ndarray, int]]):
     def __len__(self) -> int:
         return len(self.clouds)
 
-    @overload
-    def __getitem__(self, k: int) -> tuple[np.ndarray, np.ndarray, int]: ...
-
-    @overload
-    def __getitem__(self, k: slice) -> list[tuple[np.ndarray, np.ndarray, int]]: ...
-
-    def __getitem__(self, k: int | slice
-                    ) -> tuple[np.ndarray, np.ndarray, int] | list[tuple[np.ndarray, np.ndarray, int]]:
-        if isinstance(k, slice):
-            return [self[i] for i in range(*k.indices(len(self)))]
+    def __getitem__(self, k: int) -> tuple[np.ndarray, np.ndarray, int]:
         if self._last is None or self._last[0] != k:
             c = self.clouds[k]
             self._last = (k, (*doppler_points_index(c, self.min_range), int(np.shape(c)[0])))
         return self._last[1]
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray, int]]:
+        return (self[k] for k in range(len(self)))
 
 
 def _prepare_points(points: Sequence[Sequence[np.ndarray]] | None,
@@ -615,7 +610,7 @@ class _Loop:
                                       s.dcfg[r], min(want - tau, 0.0), s.cfg.planar_vz_std)
                 st["points"] += s.pts[r][k][0].shape[0]
             if still:
-                pass
+                pass                    # the zero-velocity update was this frame's update
             elif used is not None:
                 st["updates"] += 1
                 st["point_updates"] += 1

@@ -96,29 +96,41 @@ class EgoVelocityTrack:
         t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
         if t.size != len(estimates):
             raise SettingsError(f"{t.size} timestamps but {len(estimates)} estimates")
-        m = len(estimates)
-        return cls(
-            t,
-            np.array([e.velocity for e in estimates]).reshape(m, 3),
-            np.array([e.covariance for e in estimates]).reshape(m, 3, 3),
-            np.array([e.num_points for e in estimates], dtype=np.int64),
-            np.array([e.num_inliers for e in estimates], dtype=np.int64),
-            np.array([e.sigma for e in estimates], dtype=np.float64),
-            np.array([e.ok for e in estimates], dtype=bool),
-            [e.reason for e in estimates],
-            frame,
-        )
+        cols, reasons = _columns(t.size)
+        for k, e in enumerate(estimates):
+            _put(cols, reasons, k, e)
+        return cls(t, **cols, reasons=reasons, frame=frame)
 
     def std(self) -> np.ndarray:
         """float64 ``(M, 3)``: standard deviations of vx, vy, vz [m/s]."""
         return np.sqrt(np.diagonal(self.covariance, axis1=1, axis2=2))
 
 
+def _columns(m: int) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Empty columns of an :class:`EgoVelocityTrack` of ``m`` frames, and its reasons."""
+    return ({"velocity": np.empty((m, 3)), "covariance": np.empty((m, 3, 3)),
+             "num_points": np.empty(m, dtype=np.int64), "num_inliers": np.empty(m, dtype=np.int64),
+             "sigma": np.empty(m), "ok": np.empty(m, dtype=bool)}, [""] * m)
+
+
+def _put(cols: dict[str, np.ndarray], reasons: list[str], k: int, e: EgoVelocity) -> None:
+    """Row ``k`` of the columns from one frame's estimate."""
+    for name, col in cols.items():
+        col[k] = getattr(e, name)
+    reasons[k] = e.reason
+
+
 def estimate_ego_velocities(clouds: Iterable[np.ndarray], timestamps: np.ndarray,
                             config: EgoVelocityConfig | None = None, *, seed: int = 0,
                             frame: str = "radar",
-                            progress: Callable[[int, int], None] | None = None) -> EgoVelocityTrack:
+                            progress: Callable[[int, int], None] | None = None,
+                            on_frame: Callable[[int, np.ndarray, EgoVelocity], None] | None = None
+                            ) -> EgoVelocityTrack:
     """:func:`~coloradar.odometry.estimate_ego_velocity` for every cloud of a stream.
+
+    The track is filled column by column: nothing of a frame (its cloud, its estimate with
+    the inlier mask) is kept once read, so memory holds about 140 bytes a frame whatever the
+    clouds' sizes.
 
     Parameters
     ----------
@@ -136,19 +148,27 @@ def estimate_ego_velocities(clouds: Iterable[np.ndarray], timestamps: np.ndarray
         Name of the sensor frame, stored with the track.
     progress
         Called as ``progress(done, total)`` after each frame.
+    on_frame
+        Called as ``on_frame(k, cloud, estimate)`` after each frame, for a caller that keeps
+        something of the cloud or of the estimate (SLAM: the static points, on disk).
     """
     t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
-    out = []
+    cols, reasons = _columns(t.size)
+    n = 0
     for k, cloud in enumerate(clouds):
         if k >= t.size:
             raise SettingsError(f"more clouds than the {t.size} timestamps")
         rng = np.random.default_rng(np.random.SeedSequence([seed, k]))
-        out.append(estimate_ego_velocity(cloud, config=config, rng=rng))
+        e = estimate_ego_velocity(cloud, config=config, rng=rng)
+        _put(cols, reasons, k, e)
+        n = k + 1
+        if on_frame is not None:
+            on_frame(k, cloud, e)
         if progress is not None:
-            progress(k + 1, t.size)
-    if len(out) != t.size:
-        raise SettingsError(f"{t.size} timestamps but {len(out)} clouds")
-    return EgoVelocityTrack.from_estimates(t, out, frame)
+            progress(n, t.size)
+    if n != t.size:
+        raise SettingsError(f"{t.size} timestamps but {n} clouds")
+    return EgoVelocityTrack(t, **cols, reasons=reasons, frame=frame)
 
 
 def format_velocity_table(track: EgoVelocityTrack, comments: Iterable[str] = ()) -> str:

@@ -147,8 +147,7 @@ def imu_quiet(imu_t: np.ndarray, imu_f: np.ndarray, imu_w: np.ndarray, times: np
     for b in range(0, times.size, block):
         s = slice(b, b + block)
         a, z = int(lo[s].min(initial=t.size)), int(hi[s].max(initial=0))
-        if z <= a:
-            out[s] = False
+        if z <= a:                      # no IMU sample near these frames: n < 5 there
             continue
         for data, limit in ((imu_w, config.max_gyro_std), (imu_f, config.max_accel_std)):
             x = np.asarray(data[a:z], dtype=np.float64)

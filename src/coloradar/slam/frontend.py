@@ -22,11 +22,10 @@ import numpy as np
 
 from ..calib import Calibration
 from ..geometry import Trajectory
-from ..odometry.ego_velocity import EgoVelocityConfig, estimate_ego_velocity
+from ..odometry.ego_velocity import EgoVelocityConfig
 from ..odometry.rio import RioConfig, RioResult, rio_odometry
-from ..odometry.velocity_track import EgoVelocityTrack
+from ..odometry.velocity_track import EgoVelocityTrack, estimate_ego_velocities
 from ..odometry.zero_velocity import ZeroVelocityConfig, still_world
-from .stores import Growing
 
 __all__ = ["FrontEnd", "FrontEndSettings", "KeyframeRule", "estimate_track", "frontend_from_rio",
            "radar_inertial_frontend", "relative_covariance"]
@@ -90,62 +89,28 @@ KeyframeRule = Callable[[Trajectory, np.ndarray], np.ndarray]
 """``(trajectory, usable) -> int64 keyframe indices`` (:func:`.submaps.select_keyframes`)."""
 
 
-class _TrackBuilder:
-    """The columns of an :class:`EgoVelocityTrack`, filled frame by frame (no per-frame
-    Python object is kept: the :class:`EgoVelocity` of a frame, with its inlier mask, is
-    dropped once read)."""
-
-    def __init__(self) -> None:
-        self.velocity = Growing(np.float64, (3,))
-        self.covariance = Growing(np.float64, (3, 3))
-        self.num_points = Growing(np.int64)
-        self.num_inliers = Growing(np.int64)
-        self.sigma = Growing(np.float64)
-        self.ok = Growing(bool)
-        self.reasons: dict[int, str] = {}
-
-    def append(self, e) -> None:
-        if e.reason:
-            self.reasons[len(self.ok)] = e.reason
-        self.velocity.append(e.velocity)
-        self.covariance.append(e.covariance)
-        self.num_points.append(e.num_points)
-        self.num_inliers.append(e.num_inliers)
-        self.sigma.append(e.sigma)
-        self.ok.append(e.ok)
-
-    def track(self, t: np.ndarray, frame: str) -> EgoVelocityTrack:
-        m = len(self.ok)
-        reasons = [""] * m
-        for k, r in self.reasons.items():
-            reasons[k] = r
-        return EgoVelocityTrack(t[:m].copy(), self.velocity.array(), self.covariance.array(),
-                                self.num_points.array(), self.num_inliers.array(),
-                                self.sigma.array(), self.ok.array(), reasons, frame)
-
-
 def estimate_track(clouds: Iterable[np.ndarray], timestamps: np.ndarray, config: EgoVelocityConfig,
                    *, seed: int = 0, frame: str = "radar", on_frame=None,
                    zero_velocity: ZeroVelocityConfig | None = None
                    ) -> tuple[EgoVelocityTrack, np.ndarray]:
-    """Ego-velocity of every cloud (as :func:`~coloradar.odometry.estimate_ego_velocities`,
-    same seeds), and whether each shows a still world.
+    """Ego-velocity of every cloud (:func:`~coloradar.odometry.estimate_ego_velocities`), and
+    whether each shows a still world (bool ``(M,)``).
 
     ``on_frame(k, cloud, estimate)`` is called after each frame, so that a caller can keep what
     it needs of the cloud (the static points) without holding every cloud; neither the cloud
     nor the estimate is kept here.
     """
-    t = np.asarray(timestamps, dtype=np.float64).reshape(-1)
     zv = zero_velocity or ZeroVelocityConfig()
-    cols, still = _TrackBuilder(), Growing(bool)
-    for k, cloud in enumerate(clouds):
-        rng = np.random.default_rng(np.random.SeedSequence([seed, k]))
-        e = estimate_ego_velocity(cloud, config=config, rng=rng)
-        cols.append(e)
-        still.append(still_world(cloud, zv, config.min_range))
+    still = np.zeros(np.size(timestamps), dtype=bool)
+
+    def each(k: int, cloud: np.ndarray, e) -> None:
+        still[k] = still_world(cloud, zv, config.min_range)
         if on_frame is not None:
             on_frame(k, cloud, e)
-    return cols.track(t, frame), still.array()
+
+    track = estimate_ego_velocities(clouds, timestamps, config, seed=seed, frame=frame,
+                                    on_frame=each)
+    return track, still
 
 
 def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: KeyframeRule

@@ -221,7 +221,10 @@ class CFARStage:
         cmodes: tuple[CFAREdge, CFAREdge] = ("wrap", "truncate")
         r0 = max(0, min(max(self.notch_bins, self.first_range),
                         stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
-        part = self._flattened(stat[:, r0:])
+        part = stat[:, r0:]
+        floor = self._floor(part)
+        if floor is not None:
+            part = part / floor
         res = run_cfar(part, CFARConfig("ca", s.cfar_guard, s.cfar_train, s.pfa,
                                         s.cfar_rank, looks, cmodes, 1, self.ca_factor,
                                         s.cfar_excision))
@@ -238,7 +241,7 @@ class CFARStage:
         # lower the noise estimate of their neighbours, so the CFAR map starts after them.
         r0 = max(0, min(self.notch_bins, stat.shape[1] - s.cfar_guard[1] - s.cfar_train[1] - 1))
         part = stat[:, r0:]
-        floor = range_floor(part) if s.cfar_range_floor else None
+        floor = self._floor(part)
         res = run_cfar(part if floor is None else part / floor,
                        CFARConfig(s.cfar_kind, s.cfar_guard, s.cfar_train, s.pfa, s.cfar_rank,
                                   looks, cmodes, 1, self.cell_factor, s.cfar_excision))
@@ -248,9 +251,10 @@ class CFARStage:
         noise[:, r0:] = res.noise if floor is None else res.noise * floor
         return mask, noise
 
-    def _flattened(self, stat: np.ndarray) -> np.ndarray:
-        """``stat`` with its floor flattened along range (``cfar_range_floor``), else as is."""
-        return stat / range_floor(stat) if self.settings.cfar_range_floor else stat
+    def _floor(self, stat: np.ndarray) -> np.ndarray | None:
+        """float64 ``(range,)``: the floor the CFAR divides ``stat`` by along range
+        (``cfar_range_floor``, :func:`~coloradar.dsp.cfar.range_floor`); None when off."""
+        return range_floor(stat) if self.settings.cfar_range_floor else None
 
     def beam_noise_factor(self, sig2: np.ndarray | None) -> float:
         """Mean beam noise (heatmap units) per unit of the detection statistic's noise."""
