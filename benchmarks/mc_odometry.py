@@ -24,9 +24,14 @@ error (first poses put on the truth's) as % of the distance; and, for the filter
 NEES of position, velocity and attitude per degree of freedom over the output poses.
 
 Seeds: reported runs use ``--seed0`` 0 (runs 0..N−1; 3–10 s runs ``--seed0 500 --duration 3
-10``); choices were made on the tuning runs (``--tuning``: seeds 1001–1016, 90 s; 3–10 s:
+10``); choices were made on the tuning runs (``--tuning``: seeds 1001–1016, 90 s, and for the
+filter's bias walks 1001–1048; 3–10 s:
 ``--seed0 600 --duration 3 10``; never reported). ``--imu-prior 2 5`` runs the filter
-with twice the turn-on bias std and five times the bias walks (docs/odometry.md).
+with twice the default's turn-on bias std and five times its bias walks (docs/odometry.md).
+``--oracle turn-on,bias,mount`` tells every method truths a real run does not have (the IMU's
+turn-on biases or whole bias tracks taken out of its samples, the radars' true mountings in
+the calibration): bounds that show which error limits the estimates, never the default's
+figures.
 Runs are cached under ``/tmp/coloradar_mc`` (``--cache``).
 """
 
@@ -43,7 +48,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from coloradar.calib import preset_calibration
+from coloradar.calib import Calibration, Extrinsic, preset_calibration
 from coloradar.geometry import Trajectory
 from coloradar.odometry import (
     RioConfig,
@@ -97,9 +102,9 @@ def _models(rng: np.random.Generator) -> dict[str, CloudModel]:
     return {"single_chip": sc, "cascade": ca}
 
 
-def make_run(seed: int, motion: str, duration: float) -> SimRun:
-    """Draw run ``seed`` (every random choice from ``SeedSequence([seed, motion])``)."""
-    calib = preset_calibration()
+def _draw_rig(seed: int, motion: str, duration: float):
+    """The run's trajectory, IMU samples and IMU bias tracks, and the generator that draws
+    the rest of it (one order of draws, shared by :func:`make_run` and the oracles)."""
     ss = np.random.SeedSequence([seed, 1 if motion == "vehicle" else 0])
     rng = np.random.default_rng(ss)
     a = rng.uniform(8, 15)
@@ -114,18 +119,31 @@ def make_run(seed: int, motion: str, duration: float) -> SimRun:
                     gyro_bias_walk=GX5_25.gyro_bias_walk * walk,
                     accel_bias=GX5_25.accel_bias * turn, gyro_bias=GX5_25.gyro_bias * turn)
     imu_t = np.arange(0.0, duration, 1 / 300)
+    base_T_imu = preset_calibration().transforms["imu"].matrix()
+    imu, ab, gb = simulate_imu(traj, base_T_imu, imu_t, model, rng)  # type: ignore[arg-type]
+    note = f"walk x{walk:.1f} turn-on x{turn:.1f} rest {rest:.1f}s"
+    return traj, imu_t, imu, np.hstack([ab, gb]), rng, note
+
+
+def mount_errors(seed: int) -> dict[str, np.ndarray]:
+    """Per radar, the rotation vector [rad] by which it truly sits off its calibrated mounting
+    (drawn from a generator of its own, so that everything else stays as it was)."""
+    mount = np.random.default_rng([seed, 99])
+    return {radar: mount.normal(0, EXTRINSIC_STD, 3) for radar in RATES}
+
+
+def make_run(seed: int, motion: str, duration: float) -> SimRun:
+    """Draw run ``seed`` (every random choice from ``SeedSequence([seed, motion])``)."""
+    calib = preset_calibration()
+    traj, imu_t, imu, _, rng, rig_note = _draw_rig(seed, motion, duration)
     base_T_imu = calib.transforms["imu"].matrix()
-    imu, *_ = simulate_imu(traj, base_T_imu, imu_t, model, rng)  # type: ignore[arg-type]
     models = _models(rng)
     frames = {}
-    # The radars sit slightly off their calibrated mounting (EXTRINSIC_STD per axis),
-    # drawn from a generator of its own so that everything else stays as it was.
-    mount = np.random.default_rng([seed, 99])
+    mounts = mount_errors(seed)
     for radar, rate in RATES.items():
         t = np.arange(rng.uniform(0.0, 1 / rate), duration - 0.05, 1 / rate)
         b_T_r = calib.transforms[radar].matrix()
-        b_T_r[:3, :3] = b_T_r[:3, :3] @ Rotation.from_rotvec(
-            mount.normal(0, EXTRINSIC_STD, 3)).as_matrix()
+        b_T_r[:3, :3] = b_T_r[:3, :3] @ Rotation.from_rotvec(mounts[radar]).as_matrix()
         clouds, _ = simulate_clouds(traj, b_T_r, t, models[radar], rng)
         frames[radar] = (t, clouds)
     tg = np.arange(0.0, duration, 0.01)
@@ -135,7 +153,7 @@ def make_run(seed: int, motion: str, duration: float) -> SimRun:
     v_imu = st.velocity + np.cross(w_world, st.rotation.apply(
         np.tile(base_T_imu[:3, 3], (tg.size, 1))))
     sc = models["single_chip"]
-    note = (f"walk x{walk:.1f} turn-on x{turn:.1f} rest {rest:.1f}s; single chip az "
+    note = (f"{rig_note}; single chip az "
             f"{sc.azimuth_std / _DEG:.1f} el {sc.elevation_std / _DEG:.1f} deg, ghosts "
             f"{sc.ghost_fraction:.2f} movers {sc.mover_fraction:.2f}")
     return SimRun(seed, motion, duration, imu_t, imu, frames, gt, v_imu, note)
@@ -184,7 +202,8 @@ def _score(traj: Trajectory, gt: Trajectory) -> tuple[float, float]:
 
 def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:
     """The default filter with its turn-on bias uncertainties and bias-walk densities scaled
-    (``--imu-prior``; 1, 1: the datasheet's, the default)."""
+    (``--imu-prior``; 1, 1: the default's, the datasheet's turn-on biases and three times its
+    derived walks)."""
     d = RioConfig()
     return replace(d, accel_bias_std=d.accel_bias_std * turn_on,
                    gyro_bias_std=d.gyro_bias_std * turn_on,
@@ -192,12 +211,35 @@ def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:
                    gyro_bias_walk=d.gyro_bias_walk * walk)
 
 
-def evaluate(run: SimRun, radars: tuple[str, ...],
-             base: RioConfig | None = None) -> dict[str, tuple]:
+ORACLES = ("turn-on", "bias", "mount")
+"""What ``--oracle`` can tell every method that it is not told in a real run: the IMU's
+turn-on biases (removed from its samples), its whole bias tracks (turn-on and walk), the
+radars' true mountings (in the calibration)."""
+
+
+def told(run: SimRun, oracle: frozenset[str] = frozenset()) -> tuple[np.ndarray, Calibration]:
+    """The IMU samples and the calibration the methods get, with the truths in ``oracle``
+    (:data:`ORACLES`) given away: the bounds that show what limits the estimates."""
+    imu, calib = run.imu, preset_calibration()
+    if oracle & {"turn-on", "bias"}:
+        bias = _draw_rig(run.seed, run.motion, run.duration)[3]
+        imu = imu - (bias if "bias" in oracle else bias[:1])
+    if "mount" in oracle:
+        tf = dict(calib.transforms)
+        for radar, rv in mount_errors(run.seed).items():
+            rot = Rotation.from_quat(tf[radar].quaternion) * Rotation.from_rotvec(rv)
+            tf[radar] = Extrinsic(tf[radar].translation, rot.as_quat())
+        calib = replace(calib, transforms=tf)
+    return imu, calib
+
+
+def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None,
+             oracle: frozenset[str] = frozenset()) -> dict[str, tuple]:
     """Per method: (ATE %, final %, NEES p/v/θ per dof or NaN, seconds); the filters with the
-    settings ``base`` (default :class:`RioConfig`) and either update."""
+    settings ``base`` (default :class:`RioConfig`) and either update; every method told the
+    truths in ``oracle`` (:func:`told`)."""
     base = base or RioConfig()
-    calib = preset_calibration()
+    imu, calib = told(run, oracle)
     tracks, clouds = [], []
     for r in radars:
         t, cl = run.frames[r]
@@ -208,13 +250,13 @@ def evaluate(run: SimRun, radars: tuple[str, ...],
     for name, rcfg, pts in (("doppler", replace(base, update="doppler"), clouds),
                             ("ego-velocity", replace(base, update="ego-velocity"), None)):
         t0 = time.perf_counter()
-        res = rio_odometry(tracks, calib, run.imu_t, run.imu, config=rcfg, groundtruth=run.gt,
+        res = rio_odometry(tracks, calib, run.imu_t, imu, config=rcfg, groundtruth=run.gt,
                            points=pts)
         dt = time.perf_counter() - t0
         out[name] = (*_score(res.trajectory, run.gt), _nees(res, run), dt)
     for att in ("imu", "groundtruth"):
         dr = radar_inertial_odometry(tracks[0], calib, orientation=att, imu_timestamps=run.imu_t,
-                                     imu_rates=run.imu[:, 3:], groundtruth=run.gt,
+                                     imu_rates=imu[:, 3:], groundtruth=run.gt,
                                      radar=radars[0])
         out[f"DR {att}"] = (*_score(dr, run.gt), np.full(3, np.nan), 0.0)
     return out
@@ -239,6 +281,9 @@ def main() -> None:
     ap.add_argument("--imu-prior", type=float, nargs=2, default=(1.0, 1.0),
                     metavar=("TURN_ON", "WALK"),
                     help="scale the filter's turn-on bias std and bias-walk densities")
+    ap.add_argument("--oracle", default="", metavar="TRUTHS",
+                    help="comma-separated truths every method is told (bounds, never the "
+                         f"default's figures): {', '.join(ORACLES)}")
     ap.add_argument("--plot", type=Path, metavar="PNG",
                     help="also draw the final errors per configuration and method (matplotlib)")
     args = ap.parse_args()
@@ -246,6 +291,9 @@ def main() -> None:
     motions = args.motions.split(",")
     results: dict[str, list] = {c: [] for c in args.configs.split(",")}
     base = imu_prior(*args.imu_prior)
+    oracle = frozenset(o for o in args.oracle.split(",") if o)
+    if oracle - set(ORACLES):
+        ap.error(f"--oracle: unknown {sorted(oracle - set(ORACLES))}; choose from {ORACLES}")
     for i in range(args.runs):
         seed = args.seed0 + i
         motion = motions[i % len(motions)]
@@ -254,7 +302,7 @@ def main() -> None:
             seed, motion, dur = 1001 + i, ("handheld", "vehicle")[(1001 + i) % 2], 90.0
         run = cached_run(args.cache, seed, motion, round(dur, 1))
         for c in results:
-            res = evaluate(run, CONFIGS[c], base)
+            res = evaluate(run, CONFIGS[c], base, oracle)
             results[c].append(res)
             if args.verbose:
                 cells = " ".join(f"{m} {v[0]:.2f}/{v[1]:.2f}" for m, v in res.items())
