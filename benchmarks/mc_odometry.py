@@ -31,7 +31,8 @@ with twice the default's turn-on bias std and five times its bias walks (docs/od
 ``--oracle turn-on,bias,mount`` tells every method truths a real run does not have (the IMU's
 turn-on biases or whole bias tracks taken out of its samples, the radars' true mountings in
 the calibration): bounds that show which error limits the estimates, never the default's
-figures.
+figures. ``--write-dataset DIR`` also writes each run's single-chip stream as a dataset run, for
+``coloradar benchmark DIR --radar single_chip`` (docs/odometry.md).
 Runs are cached under ``/tmp/coloradar_mc`` (``--cache``).
 """
 
@@ -62,6 +63,7 @@ from coloradar.odometry.pipeline import ego_velocity_config
 from coloradar.sim.doppler_clouds import CloudModel, simulate_clouds
 from coloradar.sim.imu import GX5_25, simulate_imu
 from coloradar.sim.paths import EllipsePath
+from coloradar.sim.point_runs import PointRun, write_point_run
 from coloradar.sim.rest import RestStart
 from coloradar.sim.trajectory import make_trajectory
 
@@ -262,6 +264,19 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
     return out
 
 
+def write_dataset(run: SimRun, root: Path) -> Path:
+    """Write the run's single-chip stream (its clouds, IMU, ground truth; the calibration the
+    methods get) as a dataset run ``root/mc_<motion>_<seed>`` that ``coloradar benchmark``
+    reads. Only the single chip: the dataset has no cascade point-cloud stream."""
+    t0 = 1.6e9                                      # a Unix-like start, as the dataset's
+    t, clouds = run.frames["single_chip"]
+    gt = Trajectory(run.gt.timestamps + t0, run.gt.translations, run.gt.rotations,
+                    "groundtruth")
+    pr = PointRun("single_chip", t + t0, list(clouds), run.imu_t + t0, run.imu, gt,
+                  preset_calibration(), np.zeros((0, 3), np.float32), None, None)  # type: ignore[arg-type]
+    return write_point_run(pr, root, f"mc_{run.motion}_{run.seed}")
+
+
 CONFIGS = {"single": ("single_chip",), "cascade": ("cascade",),
            "both": ("single_chip", "cascade")}
 
@@ -284,6 +299,9 @@ def main() -> None:
     ap.add_argument("--oracle", default="", metavar="TRUTHS",
                     help="comma-separated truths every method is told (bounds, never the "
                          f"default's figures): {', '.join(ORACLES)}")
+    ap.add_argument("--write-dataset", type=Path, metavar="DIR",
+                    help="also write each run's single-chip stream as a dataset run under DIR "
+                         "(for `coloradar benchmark DIR --radar single_chip`)")
     ap.add_argument("--plot", type=Path, metavar="PNG",
                     help="also draw the final errors per configuration and method (matplotlib)")
     args = ap.parse_args()
@@ -301,6 +319,8 @@ def main() -> None:
         if args.tuning:
             seed, motion, dur = 1001 + i, ("handheld", "vehicle")[(1001 + i) % 2], 90.0
         run = cached_run(args.cache, seed, motion, round(dur, 1))
+        if args.write_dataset:
+            write_dataset(run, args.write_dataset)
         for c in results:
             res = evaluate(run, CONFIGS[c], base, oracle)
             results[c].append(res)
