@@ -39,6 +39,7 @@ Runs are cached under ``/tmp/coloradar_mc`` (``--cache``).
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import pickle
 import time
@@ -104,9 +105,11 @@ def _models(rng: np.random.Generator) -> dict[str, CloudModel]:
     return {"single_chip": sc, "cascade": ca}
 
 
-def _draw_rig(seed: int, motion: str, duration: float):
-    """The run's trajectory, IMU samples and IMU bias tracks, and the generator that draws
-    the rest of it (one order of draws, shared by :func:`make_run` and the oracles)."""
+def _draw_rig(seed: int, motion: str, duration: float, base_T_imu: np.ndarray
+              ) -> tuple[RestStart, np.ndarray, np.ndarray, np.ndarray, np.random.Generator, str]:
+    """The run's trajectory, IMU times, samples and bias tracks ``(N, 6)``, the generator that
+    draws the rest of it and a note (one order of draws, shared by :func:`make_run` and the
+    oracles)."""
     ss = np.random.SeedSequence([seed, 1 if motion == "vehicle" else 0])
     rng = np.random.default_rng(ss)
     a = rng.uniform(8, 15)
@@ -121,7 +124,6 @@ def _draw_rig(seed: int, motion: str, duration: float):
                     gyro_bias_walk=GX5_25.gyro_bias_walk * walk,
                     accel_bias=GX5_25.accel_bias * turn, gyro_bias=GX5_25.gyro_bias * turn)
     imu_t = np.arange(0.0, duration, 1 / 300)
-    base_T_imu = preset_calibration().transforms["imu"].matrix()
     imu, ab, gb = simulate_imu(traj, base_T_imu, imu_t, model, rng)  # type: ignore[arg-type]
     note = f"walk x{walk:.1f} turn-on x{turn:.1f} rest {rest:.1f}s"
     return traj, imu_t, imu, np.hstack([ab, gb]), rng, note
@@ -137,8 +139,8 @@ def mount_errors(seed: int) -> dict[str, np.ndarray]:
 def make_run(seed: int, motion: str, duration: float) -> SimRun:
     """Draw run ``seed`` (every random choice from ``SeedSequence([seed, motion])``)."""
     calib = preset_calibration()
-    traj, imu_t, imu, _, rng, rig_note = _draw_rig(seed, motion, duration)
     base_T_imu = calib.transforms["imu"].matrix()
+    traj, imu_t, imu, _, rng, rig_note = _draw_rig(seed, motion, duration, base_T_imu)
     models = _models(rng)
     frames = {}
     mounts = mount_errors(seed)
@@ -219,12 +221,20 @@ turn-on biases (removed from its samples), its whole bias tracks (turn-on and wa
 radars' true mountings (in the calibration)."""
 
 
+@functools.lru_cache(maxsize=2)
+def _bias_tracks(seed: int, motion: str, duration: float) -> np.ndarray:
+    """The run's IMU bias tracks ``(N, 6)``, drawn again (once per run: every configuration
+    of a run is told the same)."""
+    base_T_imu = preset_calibration().transforms["imu"].matrix()
+    return _draw_rig(seed, motion, duration, base_T_imu)[3]
+
+
 def told(run: SimRun, oracle: frozenset[str] = frozenset()) -> tuple[np.ndarray, Calibration]:
     """The IMU samples and the calibration the methods get, with the truths in ``oracle``
     (:data:`ORACLES`) given away: the bounds that show what limits the estimates."""
     imu, calib = run.imu, preset_calibration()
     if oracle & {"turn-on", "bias"}:
-        bias = _draw_rig(run.seed, run.motion, run.duration)[3]
+        bias = _bias_tracks(run.seed, run.motion, run.duration)
         imu = imu - (bias if "bias" in oracle else bias[:1])
     if "mount" in oracle:
         tf = dict(calib.transforms)
@@ -273,7 +283,7 @@ def write_dataset(run: SimRun, root: Path) -> Path:
     gt = Trajectory(run.gt.timestamps + t0, run.gt.translations, run.gt.rotations,
                     "groundtruth")
     pr = PointRun("single_chip", t + t0, list(clouds), run.imu_t + t0, run.imu, gt,
-                  preset_calibration(), np.zeros((0, 3), np.float32), None, None)  # type: ignore[arg-type]
+                  preset_calibration(), np.zeros((0, 3), np.float32), None, None)
     return write_point_run(pr, root, f"mc_{run.motion}_{run.seed}")
 
 
