@@ -58,6 +58,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-extrinsic-rotation", action="store_true",
                    help="filter: take the radar's extrinsic rotation as exact (default: "
                         "refine it online, the calibration's as prior)")
+    p.add_argument("--extrinsic-rotation-axes", choices=("all", "yaw"), default="all",
+                   help="filter: refine the extrinsic's roll, pitch and yaw for a radar that "
+                        "measures v_z (default), or its yaw alone")
     p.add_argument("--imu-noise-scale", type=float, default=1.0, metavar="K",
                    help="filter: multiply the IMU noise densities and bias walks of the "
                         "3DM-GX5-25 datasheet by K (default 1)")
@@ -110,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
                   update=args.update, doppler=replace(base.doppler, planar=planar),
                   time_offset=args.time_offset,
                   estimate_extrinsic_rotation=not args.no_extrinsic_rotation,
+                  extrinsic_rotation_axes=args.extrinsic_rotation_axes,
                   accel_noise_density=base.accel_noise_density * k,
                   gyro_noise_density=base.gyro_noise_density * k,
                   accel_bias_walk=base.accel_bias_walk * k,

@@ -108,6 +108,14 @@ class RioConfig:
         for a mounting error and kept.
     extrinsic_rotation_std
         Prior uncertainty of that rotation [rad].
+    extrinsic_rotation_axes
+        ``"all"`` (default): roll, pitch and yaw for a radar whose points measure ``v_z``,
+        yaw alone for a planar radar (its ego-velocity cannot see the others); ``"yaw"``:
+        yaw alone for every radar. A mounting pitch and the body's pitch tilt the measured
+        velocity alike, and only the forward accelerations tell them apart: on the
+        point-level Monte Carlo (no velocity bias) the estimated pitch wanders and ``"yaw"``
+        is ahead, on ADC-level runs (the DSP chain's few-cm/s ``v_z`` bias) ``"all"`` is
+        (docs/odometry.md, "Online extrinsic rotation").
     zero_velocity
         The zero-velocity detector's settings.
     planar_vz_std
@@ -162,6 +170,7 @@ class RioConfig:
     extrinsic_warmup: float = 0.0
     estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
+    extrinsic_rotation_axes: str = "all"
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
     planar_vz_std: float = 0.05
     zupt_std: float = 0.005
@@ -188,6 +197,9 @@ class RioConfig:
             raise SettingsError(f"max_rejected must be >= 1, got {self.max_rejected}")
         if not 0 < self.gate_probability <= 1:
             raise SettingsError(f"gate_probability must be in (0, 1], got {self.gate_probability}")
+        if self.extrinsic_rotation_axes not in ("yaw", "all"):
+            raise SettingsError(f"RioConfig.extrinsic_rotation_axes must be 'yaw' or 'all', "
+                                f"got {self.extrinsic_rotation_axes!r}")
         if self.update not in UPDATES:
             raise SettingsError(f"unknown radar update {self.update!r}; expected one of "
                                 f"{', '.join(UPDATES)}")
@@ -391,7 +403,7 @@ class _Setup:
     pts: list[_FramePoints] | None
     noises: tuple[PointNoise, ...]
     dcfg: list[DopplerConfig]
-    ext_planar: list[bool]
+    ext_yaw_only: list[bool]
     static: list[np.ndarray]
 
 
@@ -437,8 +449,10 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
     # Per radar: the points inform v_z unless the radar's model is planar (DopplerConfig).
     dcfg = [replace(cfg.doppler, planar=p if cfg.doppler.planar is None else cfg.doppler.planar)
             for p in planar]
-    # Radars whose points observe v_z see the extrinsic's roll and pitch as well.
-    ext_planar = [p and (pts is None or bool(d.planar)) for p, d in zip(planar, dcfg, strict=True)]
+    # Radars whose points observe v_z see the extrinsic's roll and pitch as well (not
+    # estimated with extrinsic_rotation_axes "yaw").
+    ext_yaw_only = [cfg.extrinsic_rotation_axes == "yaw" or (p and (pts is None or bool(d.planar)))
+                    for p, d in zip(planar, dcfg, strict=True)]
     zv = cfg.zero_velocity
     static = []
     for r, tr in enumerate(tr_list):
@@ -452,7 +466,7 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
             st = own if st is None else st | own
         static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv, st))
     return _Setup(cfg, tr_list, names, imu_t, imu_d, ekf, base_T_imu.inverse(), ext,
-                  [e.translation for e in ext], planar, pts, noises, dcfg, ext_planar, static)
+                  [e.translation for e in ext], planar, pts, noises, dcfg, ext_yaw_only, static)
 
 
 def _first_frame(s: _Setup) -> tuple[int, np.ndarray, np.ndarray, float]:
@@ -531,9 +545,10 @@ def _initialise(s: _Setup) -> tuple[int, float, np.ndarray]:
     for r in range(len(s.tracks)):
         if cfg.estimate_extrinsic_rotation:
             # A planar ego-velocity (v_x, v_y only) sees the radar's yaw, not its roll and
-            # pitch: those would only wander, so they stay at the calibration's.
+            # pitch: those would only wander, so they stay at the calibration's (and for
+            # every radar with extrinsic_rotation_axes "yaw").
             sl = ekf.phi_slice(r)
-            P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if s.ext_planar[r] \
+            P0[sl] = [0.0, 0.0, cfg.extrinsic_rotation_std**2] if s.ext_yaw_only[r] \
                 else cfg.extrinsic_rotation_std**2
     ekf.P = np.diag(P0)
     for r in range(len(s.tracks)):
