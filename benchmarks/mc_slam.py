@@ -70,6 +70,17 @@ def _gt_map_precision(run, radius: float = 0.3) -> float:
     return float(np.mean(nearest_distances(allp, run.reference_map) <= radius))
 
 
+def _true_scale(odometry, groundtruth) -> float:
+    """The scale of the Sim(3) alignment of the odometry to the ground truth (what
+    :mod:`coloradar.slam.scale` estimates)."""
+    p = odometry.translations
+    q = groundtruth.interpolate(odometry.timestamps, tolerance=1.0).translations
+    pc, qc = p - p.mean(axis=0), q - q.mean(axis=0)
+    u, sv, vt = np.linalg.svd(qc.T @ pc)
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    return float(np.trace(np.diag(sv) @ d) / np.sum(pc**2))
+
+
 def one(cache: Path, scene: str, seed: int, laps: float, radar: str, s: SlamSettings,
         max_points: int | None) -> dict:
     run = _run(cache, scene, seed, laps, radar)
@@ -93,7 +104,10 @@ def one(cache: Path, scene: str, seed: int, laps: float, radar: str, s: SlamSett
             "loops": len(res.accepted_loops), "verified": len(res.loops),
             "map_points": int(res.map_points.shape[0]), "map_precision_03": prec,
             "gt_unfiltered_precision_03": _gt_map_precision(run),
-            "seconds": sec, "duration_s": float(res.trajectory.duration)}
+            "seconds": sec, "duration_s": float(res.trajectory.duration),
+            "scale": res.scale.scale, "scale_measured": res.scale.measured,
+            "scale_std": res.scale.std, "scale_pairs": res.scale.pairs,
+            "true_scale": _true_scale(res.odometry, run.groundtruth)}
 
 
 def main() -> None:

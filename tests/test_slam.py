@@ -291,6 +291,13 @@ def test_slam_closes_the_corridor_loop_with_true_loops_only(corridor_loop):
     # it worse (the gain over longer runs is the Monte Carlo's, docs/slam.md).
     assert slam.rmse < odo.rmse + 0.01, (slam.rmse, odo.rmse)
     assert len(res.trajectory) == len(res.odometry)
+    # The single chip's odometry is a little short (docs/slam.md); the scale that registration
+    # measures is nearer the truth (the Sim(3) alignment's) than the odometry's own 1.
+    p = res.odometry.translations
+    q = gt.interpolate(res.odometry.timestamps, tolerance=1.0).translations
+    true_scale = float(np.sqrt(np.sum((q - q.mean(0)) ** 2) / np.sum((p - p.mean(0)) ** 2)))
+    assert res.scale.pairs >= 10
+    assert abs(res.scale.measured - true_scale) < abs(1.0 - true_scale), (res.scale, true_scale)
 
 
 def test_slam_map_lies_on_the_true_surfaces(corridor_loop):
@@ -317,6 +324,8 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
             assert (out / name).is_file(), name
         info = json.loads((out / "slam.json").read_text())
         assert info["radar"] == "single_chip" and info["summary"]["keyframes"] >= 5
+        assert set(info["summary"]["odometry_scale"]) == {"scale", "measured", "std", "pairs",
+                                                          "used"}
         rows = [ln for ln in (out / "trajectory.txt").read_text().splitlines()
                 if ln and not ln.startswith("#")]
         assert len(rows) == info["summary"]["frames"]
@@ -356,3 +365,48 @@ def test_without_gtsam_the_error_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "small_gicp", None)
     with pytest.raises(MissingDependencyError, match=r"coloradar\[slam\]"):
         _deps.small_gicp()
+
+
+def _street(rng: np.random.Generator) -> np.ndarray:
+    """Points on 40 boxes of random size scattered along a 70 m street, and its ground: a
+    scene with something to register against all along (no corridor-like degeneracy)."""
+    pts = [np.column_stack([rng.uniform(-5, 65, 3000), rng.uniform(-6, 6, 3000),
+                            np.zeros(3000)])]
+    for _ in range(40):
+        c = np.array([rng.uniform(-5, 65), rng.choice([-1, 1]) * rng.uniform(2.0, 6.0), 0.0])
+        size = rng.uniform(0.3, 1.5, 3)
+        b = rng.uniform(-0.5, 0.5, (120, 3)) * size
+        face = rng.integers(0, 3, 120)
+        b[np.arange(120), face] = 0.5 * np.sign(rng.uniform(-1, 1, 120)) * size[face]
+        pts.append(b + c + [0.0, 0.0, size[2] / 2])
+    return np.concatenate(pts)
+
+
+@pytest.mark.parametrize("shrink", [1.0, 0.99])
+def test_the_odometry_scale_is_measured_by_registration(shrink):
+    """Keyframes every metre along a street at 1.4 m/s; each submap the scene within 8 m,
+    seen from the keyframe's true pose; the odometry's positions shrunk by ``shrink``. The
+    scale measured from keyframes whose submaps share no frame is the true one, 1 / shrink
+    (to 0.3 %), and it is applied."""
+    from coloradar.geometry import Trajectory
+    from coloradar.slam.scale import estimate_scale
+
+    rng = np.random.default_rng(5)
+    scene = _street(rng)
+    x = np.arange(0.0, 60.0, 1.0)
+    true_pos = np.column_stack([x, 0.1 * np.sin(x / 7.0), np.full(x.size, 1.0)])
+    s = SlamSettings()
+    submaps = []
+    for p in true_pos:
+        near = scene[np.linalg.norm(scene[:, :2] - p[:2], axis=1) < 8.0] - p
+        near = near + rng.normal(0.0, 0.02, near.shape)
+        cov = np.broadcast_to(np.eye(3) * 0.02**2, (near.shape[0], 3, 3)).copy()
+        submaps.append(Submap(0, near, np.ones(near.shape[0], np.float32), cov,
+                              scan_context(near, s)))
+    odo = Trajectory(x / 1.4, shrink * (true_pos - true_pos[0]) + true_pos[0],
+                     Rotation.identity(x.size), name="odometry")
+    est = estimate_scale(odo, submaps, s)
+    assert est.used and est.pairs >= s.scale_min_pairs
+    assert abs(est.scale - 1.0 / shrink) < 0.003, est
+    off = estimate_scale(odo, submaps, replace(s, estimate_scale=False))
+    assert off.scale == 1.0 and not off.used

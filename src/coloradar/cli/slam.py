@@ -68,6 +68,10 @@ def run(args: argparse.Namespace) -> int:
           f"{s['duration_s']:.1f} s; {s['keyframes']} keyframes; {s['loops_accepted']} of "
           f"{s['loop_candidates']} loop candidates accepted; map of {s['map_points']:,} voxels; "
           f"{t:.1f} s ({s['duration_s'] / max(t, 1e-9):.1f}x real time)")
+    sc = s["odometry_scale"]
+    if sc["pairs"]:
+        print(f"  odometry scale {sc['measured']:.4f} ± {sc['std']:.4f} from {sc['pairs']} "
+              f"registrations: " + ("applied" if sc["used"] else "not applied (too uncertain)"))
     if out.map_scores is not None:
         print(format_map_scores(out.map_scores, "map against the lidar map (ground truth):"),
               end="")

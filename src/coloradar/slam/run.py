@@ -93,6 +93,7 @@ def slam_summary(res: SlamResult) -> dict:
         else 0.0,
         "timings_s": {k: round(v, 3) for k, v in res.timings.items()},
         "frontend": res.frontend.summary,
+        "odometry_scale": res.scale.as_dict(),
     }
 
 

@@ -49,6 +49,23 @@ class SlamSettings:
         Also register each keyframe's submap to the previous one and add that as a second,
         gated relative-pose factor (scan-to-submap refinement of the odometry).
 
+    Scale
+    -----
+    estimate_scale
+        Measure the odometry's scale by registering keyframes whose submaps share no frame
+        (:mod:`.scale`) and apply it to the odometry factors.
+    scale_common_radius
+        Only the points of each submap within this of the other (placed by the odometry) are
+        registered [m].
+    scale_probe
+        Each pair is registered from the odometry's relative pose with its translation
+        shortened and lengthened by this share.
+    scale_agreement
+        A pair whose two registrations differ by more than this in scale is not used.
+    scale_min_pairs, scale_max_std
+        The scale is applied only when at least this many pairs measured it, to this standard
+        error.
+
     Loop closure
     ------------
     loop_min_separation
@@ -107,6 +124,12 @@ class SlamSettings:
     max_correspondence: float = 0.6
     inlier_distance: float = 0.3
     refine_odometry: bool = False
+    estimate_scale: bool = True
+    scale_common_radius: float = 2.0
+    scale_probe: float = 0.03
+    scale_agreement: float = 0.005
+    scale_min_pairs: int = 10
+    scale_max_std: float = 0.003
     loop_min_separation: float = 8.0
     loop_search_radius: float = 2.0
     loop_gate_sigma: float = 3.0

@@ -5,8 +5,10 @@
 2. The radar-inertial filter (:mod:`.frontend`), as ``coloradar odometry`` runs it (every
    point updates it, read back from the store): a pose and covariance at every frame.
 3. Keyframes and their submaps (:mod:`.submaps`).
-4. Odometry factors between consecutive keyframes; optionally a registration factor beside each
-   (``refine_odometry``), kept when it agrees with the odometry.
+4. The odometry's scale, from registrations of keyframes whose submaps share no frame
+   (:mod:`.scale`); odometry factors between consecutive keyframes, their translations so
+   scaled; optionally a registration factor beside each (``refine_odometry``), kept when it
+   agrees with the odometry.
 5. Loop candidates, verified (:mod:`.loops`); for a radar with fewer than 3 elevation rows
    (the single chip) loops constrain x, y and yaw only.
 6. The pose graph, optimised with its consistency test (:mod:`.graph`).
@@ -40,6 +42,7 @@ from .frontend import (
 from .graph import Edge, PoseGraph, optimize_with_consistency
 from .loops import LoopRecord, loop_candidates, verify_loop
 from .registration import register
+from .scale import NOT_ESTIMATED, ScaleEstimate, estimate_scale
 from .settings import SlamSettings
 from .stores import FrameStore, SubmapStore
 from .submaps import Submaps, build_submap, point_accuracy, select_keyframes, static_mask
@@ -73,6 +76,9 @@ class SlamResult:
         Points in each keyframe's submap.
     timings
         Seconds per stage.
+    scale
+        The odometry's scale measured by registration and applied to the odometry factors
+        (:mod:`.scale`).
     """
 
     odometry: Trajectory
@@ -85,6 +91,7 @@ class SlamResult:
     frontend: FrontEnd
     submap_points: np.ndarray
     timings: dict[str, float] = field(default_factory=dict)
+    scale: ScaleEstimate = NOT_ESTIMATED
 
     @property
     def accepted_loops(self) -> list[LoopRecord]:
@@ -175,13 +182,15 @@ def build_slam_map(submaps: Submaps, poses: Trajectory | list[SE3], voxel: float
     return out[sums[:, 5] >= min_keyframes].astype(np.float32)
 
 
-def _odometry_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings) -> list[Edge]:
+def _odometry_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings, scale: float = 1.0
+                    ) -> list[Edge]:
     fl_t, fl_r = s.odometry_floor_translation, np.radians(s.odometry_floor_rotation_deg)
     traj, kfs = fe.trajectory, fe.keyframes
     edges = []
     for n in range(1, kfs.size):
         a, b = int(kfs[n - 1]), int(kfs[n])
         rel = traj[a].inverse() @ traj[b]
+        rel = SE3(rel.rotation, rel.translation * scale)
         cov = relative_covariance(fe, n - 1, n, fl_t, fl_r, scale=s.odometry_cov_scale)
         edges.append(Edge(n - 1, n, rel, cov, "odometry"))
         if s.refine_odometry:
@@ -213,16 +222,19 @@ def _loops(fe: FrontEnd, submaps: SubmapStore, s: SlamSettings, planar: bool
     return out
 
 
-def _optimise(fe: FrontEnd, submaps: Submaps, s: SlamSettings, records: list[LoopRecord]
-              ) -> tuple[list[LoopRecord], Trajectory]:
-    """Step 6: the pose graph of the odometry edges and the accepted loops, optimised with its
-    consistency test; the records of the loops it dropped say so."""
-    edges = _odometry_edges(fe, submaps, s)
+def _optimise(fe: FrontEnd, submaps: Submaps, s: SlamSettings, records: list[LoopRecord],
+              scale: float = 1.0) -> tuple[list[LoopRecord], Trajectory]:
+    """Step 6: the pose graph of the odometry edges (translations times ``scale``) and the
+    accepted loops, optimised with its consistency test; the records of the loops it dropped
+    say so."""
+    edges = _odometry_edges(fe, submaps, s, scale)
     loop_edges = [Edge(r.i, r.j, r.measured, r.covariance, "loop") for r in records
                   if r.accepted and r.measured is not None and r.covariance is not None]
     kfs = fe.keyframes
-    graph = PoseGraph([fe.trajectory[int(k)] for k in kfs], edges + loop_edges,
-                      robust_kernel=s.robust_kernel)
+    p0 = fe.trajectory[int(kfs[0])].translation
+    initial = [SE3(p.rotation, p0 + scale * (p.translation - p0))
+               for p in (fe.trajectory[int(k)] for k in kfs)]
+    graph = PoseGraph(initial, edges + loop_edges, robust_kernel=s.robust_kernel)
     after, active = optimize_with_consistency(graph, s.gate_probability)
     dropped = {(e.i, e.j) for e, a in zip(graph.edges, active, strict=True)
                if e.kind == "loop" and not a}
@@ -326,13 +338,16 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
         if kfs.size == 0:
             return SlamResult(odo, odo, kfs, None, None, [], np.zeros((0, 5), np.float32),
                               fe, np.zeros(0, np.int64), tm)
+        scale = estimate_scale(odo[kfs], submaps, s)
+        _lap("scale", t0, tm)
         records = _loops(fe, submaps, s, elevation_rows(calib.radar(radar)) < 3)
         _lap("loops", t0, tm)
-        records, after = _optimise(fe, submaps, s, records)
+        records, after = _optimise(fe, submaps, s, records, scale.scale)
         _lap("graph", t0, tm)
         out = correct_frames(fe.trajectory, kfs, fe.trajectory[kfs], after)
         m = build_slam_map(submaps, after, s.map_voxel, s.map_min_keyframes)
         _lap("map", t0, tm)
-        return SlamResult(odo, out, kfs, odo[kfs], after, records, m, fe, submaps.sizes(), tm)
+        return SlamResult(odo, out, kfs, odo[kfs], after, records, m, fe, submaps.sizes(), tm,
+                          scale)
     finally:
         submaps.close()
