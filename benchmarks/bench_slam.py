@@ -44,7 +44,7 @@ from coloradar.sim.point_runs import simulate_point_run
 from coloradar.slam import slam_from_clouds
 from coloradar.slam.frontend import estimate_track
 
-STAGES = ("ego_velocity", "filter", "submaps", "loops", "graph", "map")
+STAGES = ("ego_velocity", "filter", "submaps", "scale", "loops", "graph", "map")
 
 
 def _run(cache: Path, scene: str, minutes: float):
