@@ -215,10 +215,10 @@ def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:
                    gyro_bias_walk=d.gyro_bias_walk * walk)
 
 
-ORACLES = ("turn-on", "bias", "mount")
+ORACLES = ("turn-on", "bias", "gyro-bias", "accel-bias", "mount")
 """What ``--oracle`` can tell every method that it is not told in a real run: the IMU's
-turn-on biases (removed from its samples), its whole bias tracks (turn-on and walk), the
-radars' true mountings (in the calibration)."""
+turn-on biases (removed from its samples), its whole bias tracks (turn-on and walk; or the
+gyro's alone, or the accelerometer's alone), the radars' true mountings (in the calibration)."""
 
 
 @functools.lru_cache(maxsize=2)
@@ -233,9 +233,16 @@ def told(run: SimRun, oracle: frozenset[str] = frozenset()) -> tuple[np.ndarray,
     """The IMU samples and the calibration the methods get, with the truths in ``oracle``
     (:data:`ORACLES`) given away: the bounds that show what limits the estimates."""
     imu, calib = run.imu, preset_calibration()
-    if oracle & {"turn-on", "bias"}:
+    if oracle & {"turn-on", "bias", "gyro-bias", "accel-bias"}:
         bias = _bias_tracks(run.seed, run.motion, run.duration)
-        imu = imu - (bias if "bias" in oracle else bias[:1])
+        known = np.zeros_like(bias)
+        if "turn-on" in oracle:
+            known[:] = bias[:1]
+        for name, cols in (("accel-bias", slice(0, 3)), ("gyro-bias", slice(3, 6)),
+                           ("bias", slice(0, 6))):
+            if name in oracle:
+                known[:, cols] = bias[:, cols]
+        imu = imu - known
     if "mount" in oracle:
         tf = dict(calib.transforms)
         for radar, rv in mount_errors(run.seed).items():

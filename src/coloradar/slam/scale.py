@@ -23,8 +23,8 @@ the larger of the weights' and the pairs' own scatter over √n).
 
 Measured on the single chip's tuning runs (docs/slam.md): within 0.1 % of the scale of the
 odometry's Sim(3) alignment to the ground truth on hallway runs, and nearer 1 than it on the
-corridor and courtyard runs (under-corrected by 0.2–0.5 %, never over-corrected); on the
-cascade, whose odometry has no scale error to speak of, 0.1 % below it.
+corridor and courtyard runs (under-corrected by 0.1–0.6 %); on the cascade, whose odometry
+has no scale error to speak of, within 0.1 % of it.
 """
 
 from __future__ import annotations
