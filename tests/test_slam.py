@@ -410,3 +410,35 @@ def test_the_odometry_scale_is_measured_by_registration(shrink):
     assert abs(est.scale - 1.0 / shrink) < 0.003, est
     off = estimate_scale(odo, submaps, replace(s, estimate_scale=False))
     assert off.scale == 1.0 and not off.used
+
+
+def test_a_featureless_corridor_measures_no_scale():
+    """Two plain walls and a floor, each submap a fresh draw of points on them (as a radar
+    sees different scatterers of a smooth wall each time) along the whole corridor: nothing
+    fixes a submap along it, each pair's two registrations stay where they start (3 % apart),
+    and no scale is applied to an odometry shrunk by 1 % (no guess is better than a wrong
+    one)."""
+    from coloradar.geometry import Trajectory
+    from coloradar.slam.scale import estimate_scale
+
+    rng = np.random.default_rng(6)
+
+    def walls(n: int = 3000) -> np.ndarray:
+        x = rng.uniform(-20.0, 90.0, n)
+        side = rng.integers(0, 3, n)
+        y = np.where(side == 0, -2.0, np.where(side == 1, 2.0, rng.uniform(-2, 2, n)))
+        return np.column_stack([x, y, np.where(side == 2, 0.0, rng.uniform(0, 3, n))])
+
+    xs = np.arange(0.0, 60.0, 1.0)
+    true_pos = np.column_stack([xs, np.zeros(xs.size), np.full(xs.size, 1.0)])
+    s = SlamSettings()
+    submaps = []
+    for p in true_pos:
+        near = walls() - p
+        cov = np.broadcast_to(np.eye(3) * 0.02**2, (near.shape[0], 3, 3)).copy()
+        submaps.append(Submap(0, near, np.ones(near.shape[0], np.float32), cov,
+                              scan_context(near, s)))
+    odo = Trajectory(xs / 1.4, 0.99 * (true_pos - true_pos[0]) + true_pos[0],
+                     Rotation.identity(xs.size), name="odometry")
+    est = estimate_scale(odo, submaps, s)
+    assert not est.used and est.scale == 1.0, est

@@ -57,8 +57,8 @@ class ScaleEstimate:
     pairs
         Pairs that measured it (after the agreement test and the outlier cut).
     used
-        Whether ``scale`` differs from 1 because it was estimated (enough pairs, small
-        enough standard error).
+        Whether the measured scale was applied (enough pairs, a small enough standard
+        error).
     """
 
     scale: float
@@ -150,6 +150,6 @@ def estimate_scale(poses: Trajectory, submaps: Submaps, s: SlamSettings) -> Scal
     sk, w = m[keep, 0], 1.0 / np.maximum(m[keep, 1], 1e-12)
     n = int(sk.size)
     est = float(np.sum(w * sk) / np.sum(w))
-    std = max(1.0 / float(np.sqrt(np.sum(w))), float(np.std(sk)) / np.sqrt(n))
+    std = float(max(1.0 / np.sqrt(np.sum(w)), np.std(sk) / np.sqrt(n)))
     used = n >= s.scale_min_pairs and std <= s.scale_max_std
     return ScaleEstimate(est if used else 1.0, est, std, n, used)

@@ -169,6 +169,8 @@ class SlamSettings:
         if self.robust_kernel not in ("cauchy", "huber", "none"):
             raise SettingsError(f"SlamSettings.robust_kernel must be 'cauchy', 'huber' or "
                                 f"'none', got {self.robust_kernel!r}")
+        if not 0 <= self.scale_probe < 1:
+            raise SettingsError("SlamSettings.scale_probe is a share in [0, 1)")
         if not 0 < self.gate_probability < 1:
             raise SettingsError("SlamSettings.gate_probability must be in (0, 1)")
         if self.descriptor_rings < 1 or self.descriptor_sectors < 4:
