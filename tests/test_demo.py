@@ -54,6 +54,21 @@ def test_demo_writes_a_range_azimuth_picture_per_radar(demo):
         assert str(p) in report.text()
 
 
+def test_demo_closes_a_loop_or_says_why(demo):
+    """With the extra [slam], the demo's walk comes back and SLAM's trajectory is nearer the
+    ground truth than the odometry's; without it the report says what to install."""
+    _out, report = demo
+    if all(importlib.util.find_spec(m) for m in ("gtsam", "small_gicp")):
+        lp = report.loop
+        assert lp is not None and lp.loops >= 3 and lp.distance > 20.0
+        assert lp.slam_ate < lp.odometry_ate, (lp.slam_ate, lp.odometry_ate)
+        assert "loop closure (radar SLAM" in report.text()
+    else:
+        assert report.loop is None
+        assert "pip install 'coloradar[slam]'" in report.loop_note
+        assert report.loop_note in report.text()
+
+
 def test_demo_does_not_overwrite_without_being_asked(demo):
     from coloradar.demo import run_demo
 
@@ -64,10 +79,10 @@ def test_demo_does_not_overwrite_without_being_asked(demo):
 
 def test_demo_command(tmp_path, capsys):
     assert main(["demo", str(tmp_path / "d"), "--duration", "0.7", "--no-pictures",
-                 "--quiet"]) == 0
+                 "--no-loop", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "coloradar demo: simulated run 11_21_2026_sim_corridor_run0" in printed
-    assert "cascade (dsp)" in printed
+    assert "cascade (dsp)" in printed and "loop closure" not in printed
 
 
 def test_simulate_command(tmp_path, capsys):

@@ -9,6 +9,10 @@
    ``OUT/processed/<run>/<radar>/``.
 3. Compare the detections with the truth the simulator recorded (which scatterers each radar
    saw, where, and how fast they moved), and draw pictures.
+4. Close a loop (with the extra ``[slam]``): radar SLAM (:func:`coloradar.slam.slam_from_clouds`)
+   on a simulated 1.3-lap walk of the corridor at the point level (the single chip's on-board
+   detections, the IMU and the ground truth, :func:`coloradar.sim.point_runs.simulate_point_run`),
+   the odometry's ATE beside SLAM's.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import numpy as np
 from .errors import OutputExistsError
 from .formats.atomic import atomic_write_text
 
-__all__ = ["DemoReport", "RadarResult", "run_demo"]
+__all__ = ["DemoReport", "LoopDemo", "RadarResult", "run_demo"]
 
 MATCH_RADIUS = 0.3
 """A detection matches the truth when a scatterer the radar saw lies within this [m]."""
@@ -72,6 +76,52 @@ class RadarResult:
 
 
 @dataclass
+class LoopDemo:
+    """The demo's loop closure: radar SLAM on a simulated walk that comes back.
+
+    Attributes
+    ----------
+    laps, distance, duration
+        Laps of the corridor, path length [m] and duration [s] of the walk.
+    keyframes, loops, candidates
+        Keyframes, loop candidates accepted and verified.
+    odometry_ate, slam_ate
+        ATE RMSE (SE(3)-aligned) of the front end's and SLAM's trajectories [m].
+    scale
+        ``slam.json``'s ``odometry_scale`` record.
+    seconds
+        Simulation and SLAM [s].
+    picture
+        ``pictures/slam.png`` (None without pictures).
+    """
+
+    laps: float
+    distance: float
+    duration: float
+    keyframes: int
+    loops: int
+    candidates: int
+    odometry_ate: float
+    slam_ate: float
+    scale: dict
+    seconds: float
+    picture: Path | None = None
+
+    def lines(self) -> list[str]:
+        sc = self.scale
+        scale = (f"odometry scale {sc['measured']:.4f} ({'applied' if sc['used'] else 'not applied'})"
+                 if sc["pairs"] else "no odometry scale measured")
+        pct = 100.0 / max(self.distance, 1e-9)
+        return [f"loop closure (radar SLAM, single chip + IMU; a {self.laps}-lap walk of the "
+                "corridor, simulated at the detection level)",
+                f"  {self.distance:.0f} m in {self.duration:.0f} s, {self.keyframes} keyframes, "
+                f"{self.loops} of {self.candidates} loop candidates accepted; {scale}; "
+                f"{self.seconds:.1f} s",
+                f"  ATE: odometry {self.odometry_ate:.3f} m ({pct * self.odometry_ate:.2f} %), "
+                f"SLAM {self.slam_ate:.3f} m ({pct * self.slam_ate:.2f} %)"]
+
+
+@dataclass
 class DemoReport:
     """What :func:`run_demo` did."""
 
@@ -86,6 +136,9 @@ class DemoReport:
     total_seconds: float = 0.0
     engine: str = ""
     """Heatmap engine the processing used (``"numba"`` or ``"numpy"``)."""
+    loop: LoopDemo | None = None
+    loop_note: str = ""
+    """Why the loop closure was skipped (empty when it ran or was not asked for)."""
 
     def text(self) -> str:
         """The printed report."""
@@ -131,6 +184,10 @@ class DemoReport:
                           "ground-truth rig velocity"]
             lines += [f"  {e['text']}" for e in self.ego]
         lines.append("")
+        if self.loop is not None:
+            lines += [*self.loop.lines(), ""]
+        elif self.loop_note:
+            lines += [self.loop_note, ""]
         if self.pictures:
             lines.append("pictures:")
             lines += [f"  {p}" for p in self.pictures]
@@ -250,9 +307,56 @@ def _pictures(seq, pictures: dict, folder: Path, overwrite: bool) -> tuple[list[
     return written, ""
 
 
+LOOP_LAPS = 1.3
+"""Laps of the corridor in the demo's loop closure: the second lap's first part revisits the
+first's."""
+
+
+def _loop_closure(folder: Path, seed: int, pictures: bool, overwrite: bool) -> tuple[LoopDemo | None, str]:
+    """Step 4 of the module docstring; (None, why) without the extra ``[slam]``."""
+    import importlib.util
+
+    missing = [m for m in ("gtsam", "small_gicp") if importlib.util.find_spec(m) is None]
+    if missing:
+        return None, (f"loop closure: skipped ({' and '.join(missing)} not installed: "
+                      "pip install 'coloradar[slam]')")
+    import warnings
+
+    from .odometry import ego_velocity_config
+    from .odometry.metrics import absolute_trajectory_error
+    from .sim.point_runs import laps_duration, simulate_point_run
+    from .slam import slam_from_clouds
+    from .slam.run import slam_summary
+
+    t0 = time.perf_counter()
+    run = simulate_point_run("corridor", laps_duration("corridor", LOOP_LAPS, rest=2.0), seed,
+                             lidar_every=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # the simulated walk's sparse frames, said elsewhere
+        res = slam_from_clouds(run.clouds, run.timestamps, run.calib, run.imu_timestamps,
+                               run.imu_data, radar="single_chip",
+                               frontend=ego_velocity_config(run.calib.single_chip),
+                               groundtruth=run.groundtruth)
+    odo = absolute_trajectory_error(res.odometry, run.groundtruth)
+    slam = absolute_trajectory_error(res.trajectory, run.groundtruth)
+    s = slam_summary(res)
+    loop = LoopDemo(LOOP_LAPS, odo.path_length, float(res.trajectory.duration),
+                    int(res.keyframes.size), len(res.accepted_loops), len(res.loops), odo.rmse,
+                    slam.rmse, s["odometry_scale"], time.perf_counter() - t0)
+    path = folder / "slam.png"
+    if pictures and importlib.util.find_spec("matplotlib") is not None:
+        if path.exists() and not overwrite:
+            raise OutputExistsError(f"{path}: exists; pass --overwrite to replace it")
+        from .slam.plot import plot_slam
+
+        loop.picture = plot_slam(path, res, run.groundtruth,
+                                 title=f"corridor, {LOOP_LAPS} laps (simulated)")
+    return loop, ""
+
+
 def run_demo(out: str | os.PathLike[str] = "coloradar_demo", *, scene: str = "corridor",
              duration: float = 3.0, seed: int = 0, overwrite: bool = False,
-             pictures: bool = True, progress=None) -> DemoReport:
+             pictures: bool = True, progress=None, loop: bool = True) -> DemoReport:
     """Simulate, process and evaluate a short run (see the module docstring).
 
     Parameters
@@ -268,6 +372,8 @@ def run_demo(out: str | os.PathLike[str] = "coloradar_demo", *, scene: str = "co
     progress
         ``progress(stage, done, total)`` callback of the simulation; when given, the
         processing shows its own progress line on stderr too.
+    loop
+        Also close a loop (step 4; skipped, and said, without the extra ``[slam]``).
 
     Returns
     -------
@@ -307,6 +413,12 @@ def run_demo(out: str | os.PathLike[str] = "coloradar_demo", *, scene: str = "co
         report.ego.append(ego_velocity_report(seq, radar=radar, source=source, max_frames=None))
     if pictures:
         report.pictures, report.picture_note = _pictures(seq, pics, out / "pictures", overwrite)
+    if loop:
+        if progress is not None:
+            progress("loop closure", 0, 1)
+        report.loop, report.loop_note = _loop_closure(out / "pictures", seed, pictures, overwrite)
+        if report.loop is not None and report.loop.picture is not None:
+            report.pictures.append(report.loop.picture)
     atomic_write_text(out / DEMO_MARKER, "output of `coloradar demo`; a later demo may replace it\n")
     report.total_seconds = time.perf_counter() - t_start
     return report

@@ -15,7 +15,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "demo", help="run the whole chain on built-in simulated data (no download)",
         description="Simulate a few seconds of a ColoRadar run, process both radars' raw ADC "
                     "frames into heatmaps and point clouds, report how well the detections "
-                    "match the simulator's truth, and write pictures.")
+                    "match the simulator's truth, close a loop (radar SLAM on a simulated walk "
+                    "that comes back; extra [slam]), and write pictures.")
     p.add_argument("out", nargs="?", type=Path, default=None,
                    help="output folder (default ./coloradar_demo, where a later demo replaces "
                         "the previous one's output)")
@@ -25,6 +26,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="replace the outputs of a previous demo in OUT")
     p.add_argument("--no-pictures", action="store_true", help="skip the pictures")
+    p.add_argument("--no-loop", action="store_true",
+                   help="skip the loop closure (radar SLAM on a simulated walk; extra [slam])")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=run)
 
@@ -49,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         report = run_demo(out, scene=args.scene, duration=args.duration, seed=args.seed,
                           overwrite=overwrite, pictures=not args.no_pictures,
-                          progress=None if args.quiet else prog)
+                          progress=None if args.quiet else prog, loop=not args.no_loop)
     finally:
         prog.close()
     print(report.text())
