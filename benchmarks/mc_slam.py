@@ -34,6 +34,7 @@ import numpy as np
 from coloradar.dsp.points import strongest
 from coloradar.geometry.cloud_metrics import nearest_distances
 from coloradar.odometry import ego_velocity_config
+from coloradar.odometry.alignment import umeyama_alignment
 from coloradar.odometry.metrics import absolute_trajectory_error
 from coloradar.sim.point_runs import laps_duration, simulate_point_run
 from coloradar.slam import SlamSettings, slam_from_clouds
@@ -73,12 +74,8 @@ def _gt_map_precision(run, radius: float = 0.3) -> float:
 def _true_scale(odometry, groundtruth) -> float:
     """The scale of the Sim(3) alignment of the odometry to the ground truth (what
     :mod:`coloradar.slam.scale` estimates)."""
-    p = odometry.translations
     q = groundtruth.interpolate(odometry.timestamps, tolerance=1.0).translations
-    pc, qc = p - p.mean(axis=0), q - q.mean(axis=0)
-    u, sv, vt = np.linalg.svd(qc.T @ pc)
-    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
-    return float(np.trace(np.diag(sv) @ d) / np.sum(pc**2))
+    return umeyama_alignment(odometry.translations, q, with_scale=True).scale
 
 
 def one(cache: Path, scene: str, seed: int, laps: float, radar: str, s: SlamSettings,

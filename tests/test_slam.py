@@ -293,9 +293,10 @@ def test_slam_closes_the_corridor_loop_with_true_loops_only(corridor_loop):
     assert len(res.trajectory) == len(res.odometry)
     # The single chip's odometry is a little short (docs/slam.md); the scale that registration
     # measures is nearer the truth (the Sim(3) alignment's) than the odometry's own 1.
-    p = res.odometry.translations
+    from coloradar.odometry.alignment import umeyama_alignment
+
     q = gt.interpolate(res.odometry.timestamps, tolerance=1.0).translations
-    true_scale = float(np.sqrt(np.sum((q - q.mean(0)) ** 2) / np.sum((p - p.mean(0)) ** 2)))
+    true_scale = umeyama_alignment(res.odometry.translations, q, with_scale=True).scale
     assert res.scale.pairs >= 10
     assert abs(res.scale.measured - true_scale) < abs(1.0 - true_scale), (res.scale, true_scale)
 

@@ -88,7 +88,7 @@ class LoopDemo:
     odometry_ate, slam_ate
         ATE RMSE (SE(3)-aligned) of the front end's and SLAM's trajectories [m].
     scale
-        ``slam.json``'s ``odometry_scale`` record.
+        :meth:`coloradar.slam.scale.ScaleEstimate.as_dict` (as ``slam.json`` records it).
     seconds
         Simulation and SLAM [s].
     picture
@@ -326,7 +326,6 @@ def _loop_closure(folder: Path, seed: int, pictures: bool, overwrite: bool) -> t
     from .odometry.metrics import absolute_trajectory_error
     from .sim.point_runs import laps_duration, simulate_point_run
     from .slam import slam_from_clouds
-    from .slam.run import slam_summary
 
     t0 = time.perf_counter()
     run = simulate_point_run("corridor", laps_duration("corridor", LOOP_LAPS, rest=2.0), seed,
@@ -339,10 +338,9 @@ def _loop_closure(folder: Path, seed: int, pictures: bool, overwrite: bool) -> t
                                groundtruth=run.groundtruth)
     odo = absolute_trajectory_error(res.odometry, run.groundtruth)
     slam = absolute_trajectory_error(res.trajectory, run.groundtruth)
-    s = slam_summary(res)
     loop = LoopDemo(LOOP_LAPS, odo.path_length, float(res.trajectory.duration),
                     int(res.keyframes.size), len(res.accepted_loops), len(res.loops), odo.rmse,
-                    slam.rmse, s["odometry_scale"], time.perf_counter() - t0)
+                    slam.rmse, res.scale.as_dict(), time.perf_counter() - t0)
     path = folder / "slam.png"
     if pictures and importlib.util.find_spec("matplotlib") is not None:
         if path.exists() and not overwrite:
