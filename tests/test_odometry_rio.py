@@ -271,6 +271,30 @@ def test_a_grossly_wrong_first_frame_does_not_seed_the_filter():
     assert end < 0.02 * dist, (end, dist)
 
 
+def test_a_lone_wrong_first_frame_before_a_gap_does_not_seed_the_filter():
+    """As above, but the wrong frame is followed by 2 s without an ego-velocity (a sparse
+    start, as the simulated courtyard seed 2001 of the single chip has): over 2 s the IMU
+    allows any change of velocity up to 20 m/s, so the next frame cannot refute the wrong
+    one. The filter must start at the first frame with a measured neighbour within its
+    alignment window, not 5 m/s off (which put that run's end 16 m off on 12 m)."""
+    imu_t, data, track, traj, *_ = _synthetic(20.0, 4, speed=1.5)
+    bad_v = track.velocity.copy()
+    bad_v[0] += [3.4, 3.8, 0.0]
+    ok = track.ok.copy()
+    ok[1:21] = False
+    bad_v[1:21] = np.nan
+    cov = track.covariance.copy()
+    cov[0] = 0.5**2 * np.eye(3)              # a fit to a few points: loosely determined
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = rio_odometry(replace(track, velocity=bad_v, ok=ok, covariance=cov), PRESET,
+                           imu_t, data)
+    assert res.frame_timestamps[0] == track.timestamps[21]
+    p_true, _ = _relative_truth(traj, res.trajectory.timestamps)
+    end = np.linalg.norm(res.trajectory.translations[-1] - p_true[-1])
+    assert end < 0.02 * _path_length(p_true), end
+
+
 def test_zero_velocity_updates_at_rest():
     """4 s at rest, then motion. Nobody says so: the detector must find the rest frames
     (radar speed ~0, IMU quiet), and the zero-rate updates must give the gyro bias."""

@@ -487,8 +487,12 @@ def _first_frame(s: _Setup) -> tuple[int, np.ndarray, np.ndarray, float]:
 
     def corroborated(k: int) -> bool:
         # A moving start takes the frame's velocity as the filter's: the next measured frame
-        # must agree with it as far as the IMU allows (see _consistent).
+        # must agree with it as far as the IMU allows (see _consistent). That bound grows by
+        # g a second, so the next frame must come within the alignment window: a lone
+        # frame seconds before the next (a few points fitted by a wrong motion) says nothing.
         nxt = meas[meas > k]
+        if nxt.size and prim.timestamps[nxt[0]] - prim.timestamps[k] > cfg.align_window:
+            return bool(s.static[0][k])
         return s.static[0][k] or nxt.size == 0 or _consistent(
             prim, k, int(nxt[0]), ekf, s.t_ir[0], ekf.R_ir[0], cfg.time_offset,
             cfg.velocity_noise_floor, gate_sigma, cfg.velocity_noise_scale)
