@@ -36,6 +36,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="or every DEG degrees of turn (default 15)")
     p.add_argument("--refine-odometry", action="store_true",
                    help="also register consecutive keyframe submaps (scan-to-submap factors)")
+    p.add_argument("--disjoint-registration", choices=("elevation", "always", "never"),
+                   default="elevation",
+                   help="register keyframes whose submaps share no frame and add the results "
+                        "as factors: for a radar that resolves elevation (the cascade; "
+                        "default), always, or never")
     p.add_argument("--score-map", action="store_true",
                    help="score the map against the lidar map built with ground truth (the run "
                         "needs lidar and ground truth); the scores go to slam.json")
@@ -53,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
 
     settings = replace(SlamSettings(), keyframe_distance=args.keyframe_distance,
                        keyframe_angle_deg=args.keyframe_angle,
-                       refine_odometry=args.refine_odometry)
+                       refine_odometry=args.refine_odometry,
+                       disjoint_registration=args.disjoint_registration)
     check_input(args.run)
     check_output_outside_dataset(args.out, (args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
@@ -68,6 +74,9 @@ def run(args: argparse.Namespace) -> int:
           f"{s['duration_s']:.1f} s; {s['keyframes']} keyframes; {s['loops_accepted']} of "
           f"{s['loop_candidates']} loop candidates accepted; map of {s['map_points']:,} voxels; "
           f"{t:.1f} s ({s['duration_s'] / max(t, 1e-9):.1f}x real time)")
+    if s["factors"]["registration"]:
+        print(f"  {s['factors']['registration']} registration factors between keyframes whose "
+              "submaps share no frame")
     sc = s["odometry_scale"]
     if sc["pairs"]:
         print(f"  odometry scale {sc['measured']:.4f} ± {sc['std']:.4f} from {sc['pairs']} "

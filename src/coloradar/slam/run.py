@@ -94,6 +94,7 @@ def slam_summary(res: SlamResult) -> dict:
         "timings_s": {k: round(v, 3) for k, v in res.timings.items()},
         "frontend": res.frontend.summary,
         "odometry_scale": res.scale.as_dict(),
+        "factors": {k: res.factors.get(k, 0) for k in ("odometry", "registration", "loop")},
     }
 
 

@@ -39,7 +39,7 @@ from .registration import register
 from .settings import SlamSettings
 from .submaps import Submap, Submaps
 
-__all__ = ["NOT_ESTIMATED", "ScaleEstimate", "estimate_scale", "pair_scales"]
+__all__ = ["NOT_ESTIMATED", "ScaleEstimate", "disjoint_pairs", "estimate_scale", "pair_scales"]
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ class ScaleEstimate:
                 "pairs": self.pairs, "used": self.used}
 
 
-def _partners(times: np.ndarray, window: float) -> list[tuple[int, int]]:
+def disjoint_pairs(times: np.ndarray, window: float) -> list[tuple[int, int]]:
     """Keyframe pairs ``(a, b)``: for each keyframe ``a`` the first ``b`` at least ``2 ·
     window`` seconds later (submaps of ± ``window`` seconds then share no frame)."""
     b = np.searchsorted(times, times + 2.0 * window, side="left")
@@ -109,7 +109,7 @@ def pair_scales(poses: Trajectory, submaps: Submaps, s: SlamSettings) -> np.ndar
         overlap less than a loop's) and the registration's.
     """
     out = []
-    for a, b in _partners(np.asarray(poses.timestamps), s.submap_window):
+    for a, b in disjoint_pairs(np.asarray(poses.timestamps), s.submap_window):
         rel = poses[a].inverse() @ poses[b]
         length = float(np.linalg.norm(rel.translation))
         if length < s.keyframe_distance:

@@ -48,6 +48,14 @@ class SlamSettings:
     refine_odometry
         Also register each keyframe's submap to the previous one and add that as a second,
         gated relative-pose factor (scan-to-submap refinement of the odometry).
+    disjoint_registration
+        Where to register each keyframe's submap to that of the first keyframe ``2 ·
+        submap_window`` later (the two share no frame) and add it as a gated relative-pose
+        factor with the loop factors' floors, holding the odometry's drift between loops
+        (:func:`coloradar.slam.system._disjoint_edges`): ``"elevation"`` for a radar with at
+        least 3 elevation rows (the cascade; the single chip's registrations of submaps seen
+        seconds apart are too coarse: the factors made its SLAM worse on 4 of 10 tuning runs
+        and better on 5), ``"always"`` or ``"never"``.
 
     Scale
     -----
@@ -65,6 +73,9 @@ class SlamSettings:
     scale_min_pairs, scale_max_std
         The scale is applied only when at least this many pairs measured it, to this standard
         error.
+    scale_rebuild
+        When a scale is applied, build the submaps again with the odometry so scaled, so that
+        loops and the map use submaps at the graph's scale.
 
     Loop closure
     ------------
@@ -124,12 +135,14 @@ class SlamSettings:
     max_correspondence: float = 0.6
     inlier_distance: float = 0.3
     refine_odometry: bool = False
+    disjoint_registration: str = "elevation"
     estimate_scale: bool = True
     scale_common_radius: float = 2.0
     scale_probe: float = 0.03
     scale_agreement: float = 0.005
     scale_min_pairs: int = 10
     scale_max_std: float = 0.003
+    scale_rebuild: bool = True
     loop_min_separation: float = 8.0
     loop_search_radius: float = 2.0
     loop_gate_sigma: float = 3.0
@@ -166,6 +179,9 @@ class SlamSettings:
         if self.registration != "GICP":
             raise SettingsError(f"SlamSettings.registration must be 'GICP', got "
                                 f"{self.registration!r}")
+        if self.disjoint_registration not in ("elevation", "always", "never"):
+            raise SettingsError(f"SlamSettings.disjoint_registration must be 'elevation', "
+                                f"'always' or 'never', got {self.disjoint_registration!r}")
         if self.robust_kernel not in ("cauchy", "huber", "none"):
             raise SettingsError(f"SlamSettings.robust_kernel must be 'cauchy', 'huber' or "
                                 f"'none', got {self.robust_kernel!r}")
