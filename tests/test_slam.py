@@ -358,6 +358,13 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
             table = {row["method"]: row for row in csv.DictReader(f) if row["run"] == folder.name}
         assert set(table) == {"slam", "coloradar"}
         assert table["slam"]["status"] == "ok" and float(table["slam"]["ate_rmse_m"]) < 0.1
+        # Asked for, the single chip gets the disjoint-submap factors too.
+        capsys.readouterr()
+        assert main(["slam", str(folder), "--out", str(tmp_path / "slam2"), "--no-plot",
+                     "--disjoint-registration", "always"]) == 0
+        assert "registration factors between keyframes" in capsys.readouterr().out
+        info = json.loads((tmp_path / "slam2" / "slam.json").read_text())
+        assert info["summary"]["factors"]["registration"] > 0
 
 
 def test_without_gtsam_the_error_names_the_extra(monkeypatch):
@@ -386,6 +393,20 @@ def _street(rng: np.random.Generator) -> np.ndarray:
     return np.concatenate(pts)
 
 
+def _street_submaps(scene: np.ndarray, true_pos: np.ndarray, rng: np.random.Generator,
+                    s: SlamSettings) -> list[Submap]:
+    """Each keyframe's submap: the scene within 8 m of its true position (no rotation), in its
+    frame, with 2 cm of noise and that as each point's covariance."""
+    submaps = []
+    for p in true_pos:
+        near = scene[np.linalg.norm(scene[:, :2] - p[:2], axis=1) < 8.0] - p
+        near = near + rng.normal(0.0, 0.02, near.shape)
+        cov = np.broadcast_to(np.eye(3) * 0.02**2, (near.shape[0], 3, 3)).copy()
+        submaps.append(Submap(0, near, np.ones(near.shape[0], np.float32), cov,
+                              scan_context(near, s)))
+    return submaps
+
+
 @pytest.mark.parametrize("shrink", [1.0, 0.99])
 def test_the_odometry_scale_is_measured_by_registration(shrink):
     """Keyframes every metre along a street at 1.4 m/s; each submap the scene within 8 m,
@@ -400,13 +421,7 @@ def test_the_odometry_scale_is_measured_by_registration(shrink):
     x = np.arange(0.0, 60.0, 1.0)
     true_pos = np.column_stack([x, 0.1 * np.sin(x / 7.0), np.full(x.size, 1.0)])
     s = SlamSettings()
-    submaps = []
-    for p in true_pos:
-        near = scene[np.linalg.norm(scene[:, :2] - p[:2], axis=1) < 8.0] - p
-        near = near + rng.normal(0.0, 0.02, near.shape)
-        cov = np.broadcast_to(np.eye(3) * 0.02**2, (near.shape[0], 3, 3)).copy()
-        submaps.append(Submap(0, near, np.ones(near.shape[0], np.float32), cov,
-                              scan_context(near, s)))
+    submaps = _street_submaps(scene, true_pos, rng, s)
     odo = Trajectory(x / 1.4, shrink * (true_pos - true_pos[0]) + true_pos[0],
                      Rotation.identity(x.size), name="odometry")
     est = estimate_scale(odo, submaps, s)
@@ -463,13 +478,7 @@ def test_disjoint_submap_factors_hold_the_drift_of_an_open_path():
     x = np.arange(0.0, 60.0, 1.0)
     true_pos = np.column_stack([x, np.zeros(x.size), np.full(x.size, 1.0)])
     s = SlamSettings()
-    submaps = []
-    for p in true_pos:
-        near = scene[np.linalg.norm(scene[:, :2] - p[:2], axis=1) < 8.0] - p
-        near = near + rng.normal(0.0, 0.02, near.shape)
-        cov = np.broadcast_to(np.eye(3) * 0.02**2, (near.shape[0], 3, 3)).copy()
-        submaps.append(Submap(0, near, np.ones(near.shape[0], np.float32), cov,
-                              scan_context(near, s)))
+    submaps = _street_submaps(scene, true_pos, rng, s)
     # The odometry: heading drifting 0.05° a metre (the path bends), height 1 cm a metre.
     yaw = np.radians(0.05) * x
     step = np.column_stack([np.cos(yaw), np.sin(yaw), np.full(x.size, 0.01)])
@@ -561,3 +570,13 @@ def test_submaps_are_built_again_at_the_measured_scale():
         for m in opened:
             m.close()
         store.close()
+
+
+@pytest.mark.parametrize("field, value", [("disjoint_registration", "yes"),
+                                          ("robust_kernel", "tukey"), ("min_fitness", 1.5),
+                                          ("keyframe_distance", 0.0), ("scale_probe", -0.1)])
+def test_bad_settings_say_which_field(field, value):
+    from coloradar.errors import SettingsError
+
+    with pytest.raises(SettingsError, match=field):
+        SlamSettings(**{field: value})
