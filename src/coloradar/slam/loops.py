@@ -35,7 +35,8 @@ from .registration import register
 from .settings import SlamSettings
 from .submaps import Submaps, descriptor_distance
 
-__all__ = ["Candidate", "LoopRecord", "factor_floor", "loop_candidates", "verify_loop"]
+__all__ = ["Candidate", "LoopRecord", "factor_floor", "loop_candidates", "odometry_chi2",
+           "verify_loop"]
 
 
 @dataclass(frozen=True)
@@ -127,9 +128,16 @@ def loop_candidates(j: int, positions: np.ndarray, path: np.ndarray, position_co
     return out[:settings.max_loop_candidates]
 
 
-def _log_se3(t: SE3) -> np.ndarray:
-    """First-order tangent ``(ω, v)`` of a small pose (rotation vector, translation)."""
-    return np.concatenate([t.rotation.as_rotvec(), t.translation])
+def odometry_chi2(odometry: SE3, odometry_cov: np.ndarray, measured: SE3,
+                  measured_cov: np.ndarray) -> float:
+    """Squared Mahalanobis distance of a registered relative pose ``measured`` from the
+    odometry's, with the two ``(6, 6)`` covariances summed (both in the source frame ``j``,
+    GTSAM's ``Pose3`` tangent order): ``Log(T_odo⁻¹ T_reg)`` to first order (rotation
+    vector, translation). The test of loops, ``refine_odometry`` and the disjoint-submap
+    factors against the odometry."""
+    err = odometry.inverse() @ measured
+    resid = np.concatenate([err.rotation.as_rotvec(), err.translation])
+    return float(resid @ np.linalg.solve(measured_cov + odometry_cov, resid))
 
 
 PLANAR_RELEASE = (np.radians(10.0), 0.2)
@@ -180,9 +188,7 @@ def verify_loop(c: Candidate, submaps: Submaps, odometry: SE3, odometry_cov: np.
         return LoopRecord(**base, odometry_chi2=np.nan, accepted=False,
                           reason="registration gave no covariance (degenerate geometry)")
     factor_cov = cov + floor
-    resid = _log_se3(odometry.inverse() @ reg.target_T_source)
-    # The registration's covariance is at the source (j) frame, as the odometry's.
-    m = float(resid @ np.linalg.solve(factor_cov + odometry_cov, resid))
+    m = odometry_chi2(odometry, odometry_cov, reg.target_T_source, factor_cov)
     limit = float(chi2.ppf(settings.gate_probability, 6))
     if m > limit:
         return LoopRecord(**base, odometry_chi2=m, accepted=False,

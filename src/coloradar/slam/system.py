@@ -42,7 +42,7 @@ from .frontend import (
     relative_covariance,
 )
 from .graph import Edge, PoseGraph, optimize_with_consistency
-from .loops import LoopRecord, factor_floor, loop_candidates, verify_loop
+from .loops import LoopRecord, factor_floor, loop_candidates, odometry_chi2, verify_loop
 from .registration import register
 from .scale import NOT_ESTIMATED, ScaleEstimate, disjoint_pairs, estimate_scale
 from .settings import SlamSettings
@@ -201,12 +201,11 @@ def _odometry_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings, scale: floa
         edges.append(Edge(n - 1, n, rel, cov, "odometry"))
         if s.refine_odometry:
             reg = register(submaps[n - 1], submaps[n], rel, s)
-            if (reg.fitness >= s.min_fitness and np.all(np.isfinite(reg.covariance))):
-                d = np.concatenate([(rel.inverse() @ reg.target_T_source).rotation.as_rotvec(),
-                                    (rel.inverse() @ reg.target_T_source).translation])
-                if float(d @ np.linalg.solve(cov + reg.covariance, d)) < chi2.ppf(s.gate_probability, 6):
-                    edges.append(Edge(n - 1, n, reg.target_T_source, reg.covariance,
-                                      "registration"))
+            if (reg.fitness >= s.min_fitness and np.all(np.isfinite(reg.covariance))
+                    and odometry_chi2(rel, cov, reg.target_T_source, reg.covariance)
+                    < chi2.ppf(s.gate_probability, 6)):
+                edges.append(Edge(n - 1, n, reg.target_T_source, reg.covariance,
+                                  "registration"))
     return edges
 
 
@@ -234,9 +233,7 @@ def _disjoint_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings, scale: floa
         if reg.fitness < 0.5 * s.min_fitness or not np.all(np.isfinite(reg.covariance)):
             continue
         cov = relative_covariance(fe, a, b, fl_t, fl_r, steps=b - a, scale=s.odometry_cov_scale)
-        err = rel.inverse() @ reg.target_T_source
-        d = np.concatenate([err.rotation.as_rotvec(), err.translation])
-        if float(d @ np.linalg.solve(cov + reg.covariance + floor, d)) < limit:
+        if odometry_chi2(rel, cov, reg.target_T_source, reg.covariance + floor) < limit:
             edges.append(Edge(a, b, reg.target_T_source, reg.covariance + floor, "registration"))
     return edges
 
