@@ -225,7 +225,7 @@ def _rio_accuracy(runs: list[str]) -> None:
             cells, td, td_std, td_sc, td_sc_std = [], 0.0, 0.0, 0.0, 0.0
             for radars in (["cascade"], ["single_chip"], ["cascade", "single_chip"]):
                 res = rio_odometry([tr[r][0] for r in radars], seq.calib, imu.timestamps,
-                                   imu.data, groundtruth=gt, config=cfg,
+                                   imu.data, initial_pose=gt, config=cfg,
                                    still=[tr[r][1] for r in radars])
                 cells.append(score(res.trajectory))
                 if len(radars) == 2:                  # the default: the cascade's offset

@@ -14,11 +14,11 @@ fresh subprocess (so that one length's memory does not carry into the next):
   call (``VmHWM``, reset through ``/proc/self/clear_refs`` just before) less the resident
   memory before it; the run's clouds and IMU, loaded before, are the caller's;
 - the **peak of traced allocations** (``tracemalloc``, a second pass) per stage of the call:
-  ego-velocities (static points go to disk), the filter (:func:`coloradar.odometry.rio_odometry`,
-  not SLAM's code), submaps, loops, graph, map;
-- what the **filter's result** (``RioResult``) holds when it returns (traced memory it keeps),
-  per frame: SLAM reduces it to its trajectory and keyframe covariances at once, but its peak
-  is the filter's.
+  ego-velocities (static points go to disk), the filter (:func:`coloradar.odometry.rio_odometry`
+  with ``keep``: its state kept at the keyframes only), submaps, scale, loops, graph, map;
+- for comparison, the filter as ``coloradar odometry`` runs it (every pose's state kept):
+  what its **result** (``RioResult``) holds when it returns (traced memory it keeps, also per
+  frame) and its traced peak.
 
 Flat in run length means the figures grow by little from 2 to 10 minutes; the script prints
 the growth per minute of each.
@@ -74,7 +74,7 @@ def _filter(r, track, still):
     """The filter as ``coloradar odometry`` and SLAM's front end run it (every point updates
     it; the clouds in memory here, the caller's)."""
     return rio_odometry(track, r.calib, r.imu_timestamps, r.imu_data, radars=(r.radar,),
-                        groundtruth=r.groundtruth, still=[still], points=[r.clouds])
+                        initial_pose=r.groundtruth, still=[still], points=[r.clouds])
 
 
 def _status_kb(field: str) -> int:

@@ -269,7 +269,7 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
     for name, rcfg, pts in (("doppler", replace(base, update="doppler"), clouds),
                             ("ego-velocity", replace(base, update="ego-velocity"), None)):
         t0 = time.perf_counter()
-        res = rio_odometry(tracks, calib, run.imu_t, imu, config=rcfg, groundtruth=run.gt,
+        res = rio_odometry(tracks, calib, run.imu_t, imu, config=rcfg, initial_pose=run.gt,
                            points=pts)
         dt = time.perf_counter() - t0
         out[name] = (*_score(res.trajectory, run.gt), _nees(res, run), dt)

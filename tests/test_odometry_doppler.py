@@ -225,7 +225,7 @@ def test_pitching_heaving_rig_recovered_in_3d():
     for update, cfg in configs.items():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = rio_odometry(track, calib, imu_t, imu, points=[clouds], groundtruth=gt,
+            res = rio_odometry(track, calib, imu_t, imu, points=[clouds], initial_pose=gt,
                                config=cfg)
         p_gt = gt.interpolate_arrays(res.trajectory.timestamps)[0]
         heave = _detrend(p_gt[:, 2])
@@ -265,7 +265,7 @@ def _final_attitude_nees(seed: int, cfg: RioConfig) -> float:
     gt = Trajectory(imu_t, st.position, st.rotation, "groundtruth")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = rio_odometry(track, calib, imu_t, imu, points=[clouds], groundtruth=gt,
+        res = rio_odometry(track, calib, imu_t, imu, points=[clouds], initial_pose=gt,
                            config=cfg)
     _, r_gt = gt.interpolate_arrays(res.trajectory.timestamps[-1:])
     e = (r_gt * res.trajectory.rotations[-1:].inv()).as_rotvec()[0]

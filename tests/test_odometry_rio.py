@@ -295,6 +295,48 @@ def test_a_lone_wrong_first_frame_before_a_gap_does_not_seed_the_filter():
     assert end < 0.02 * _path_length(p_true), end
 
 
+def test_keeping_the_state_at_chosen_poses_only_loses_nothing_there():
+    """``keep`` (SLAM keeps the filter's covariance at its keyframes only, so that memory does
+    not grow with the run): the trajectory is the full run's, bit for bit; at the poses asked
+    for, the anchoring pose (the first ``anchor_delay`` seconds in) and the last, every kept
+    field is the full run's there; ``keep`` sees each output pose once, in order, with its
+    radar frame, and up to the re-anchoring's rigid motion (distances and relative angles
+    equal the output's)."""
+    imu_t, data, track, *_ = _synthetic(20.0, 5)
+    full = rio_odometry(track, PRESET, imu_t, data)
+    seen = []
+
+    def keep(i, k, p, r):
+        seen.append((i, k, np.array(p), np.array(r)))
+        return i % 37 == 5
+
+    lean = rio_odometry(track, PRESET, imu_t, data, keep=keep)
+    n = len(full.trajectory)
+    assert full.kept is None and len(lean.trajectory) == n
+    np.testing.assert_array_equal(lean.trajectory.translations, full.trajectory.translations)
+    np.testing.assert_array_equal(lean.trajectory.rotations.as_quat(),
+                                  full.trajectory.rotations.as_quat())
+    t = full.trajectory.timestamps
+    anchor = int(np.flatnonzero(t >= t[0] + RioConfig().anchor_delay)[0])
+    assert lean.kept.tolist() == sorted(set(range(5, n, 37)) | {anchor, n - 1})
+    for name in ("covariance", "velocity", "accel_bias", "gyro_bias", "gyro_bias_std",
+                 "time_offset", "velocity_covariance"):
+        np.testing.assert_allclose(getattr(lean, name), getattr(full, name)[lean.kept],
+                                   rtol=1e-12, atol=1e-15, err_msg=name)
+    assert [s[0] for s in seen] == list(range(n))
+    frames = np.searchsorted(track.timestamps, full.frame_timestamps)
+    assert [s[1] for s in seen] == frames.tolist()
+    pos = np.array([s[2] for s in seen])
+    out = np.asarray(full.trajectory.translations)
+    later = slice(anchor, None)      # the attitudes before are smoothed afterwards
+    np.testing.assert_allclose(np.linalg.norm(pos[later] - pos[anchor], axis=1),
+                               np.linalg.norm(out[later] - out[anchor], axis=1), atol=1e-9)
+    rel_seen = Rotation.from_matrix(np.array([s[3] for s in seen[later]]))
+    rel_seen = (rel_seen[0].inv() * rel_seen).magnitude()
+    rot = full.trajectory.rotations[later]
+    np.testing.assert_allclose(rel_seen, (rot[0].inv() * rot).magnitude(), atol=1e-9)
+
+
 def test_zero_velocity_updates_at_rest():
     """4 s at rest, then motion. Nobody says so: the detector must find the rest frames
     (radar speed ~0, IMU quiet), and the zero-rate updates must give the gyro bias."""

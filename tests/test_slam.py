@@ -301,6 +301,43 @@ def test_slam_closes_the_corridor_loop_with_true_loops_only(corridor_loop):
     assert abs(res.scale.measured - true_scale) < abs(1.0 - true_scale), (res.scale, true_scale)
 
 
+def test_keyframes_follow_the_rule_and_keep_the_filters_covariance(corridor_loop):
+    """The keyframes, chosen as the filter runs, obey the rule on the odometry it outputs
+    (checked here pose by pose: each keyframe is the first usable pose ``keyframe_distance``
+    or ``keyframe_angle_deg`` from the previous one; the first seconds' attitudes, smoothed
+    after the filter saw them, are left out); their covariances are those the filter gives
+    there when it keeps every pose's."""
+    from coloradar.odometry import rio_odometry
+
+    run, res = corridor_loop
+    fe, st = res.frontend, SlamSettings()
+    traj, kfs = fe.trajectory, fe.keyframes
+    t = traj.timestamps
+    start = int(np.searchsorted(kfs, np.searchsorted(t, t[0] + 6.0)))
+    p, r = np.asarray(traj.translations), traj.rotations
+    for a, b in zip(kfs[start:-1], kfs[start + 1:], strict=True):
+        between = np.arange(a + 1, b + 1)
+        far = (np.linalg.norm(p[between] - p[a], axis=1) >= st.keyframe_distance - 1e-6) | (
+            np.degrees((r[a].inv() * r[between]).magnitude()) >= st.keyframe_angle_deg - 1e-6)
+        first = between[far & fe.ok[between]]
+        assert first.size and first[0] == b, (a, b)
+    assert np.all(fe.ok[kfs])
+    # The front end's covariances against the filter run alone, every pose kept.
+    from coloradar.odometry import ego_velocity_config
+    from coloradar.slam.frontend import estimate_track
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        track, still = estimate_track(run.clouds, run.timestamps,
+                                      ego_velocity_config(run.calib.single_chip),
+                                      frame="single_chip")
+        full = rio_odometry(track, run.calib, run.imu_timestamps, run.imu_data,
+                            radars=("single_chip",), initial_pose=run.groundtruth,
+                            still=[still], points=[run.clouds])
+    np.testing.assert_allclose(fe.covariance, full.covariance[kfs], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(traj.translations, full.trajectory.translations, atol=1e-9)
+
+
 def test_slam_map_lies_on_the_true_surfaces(corridor_loop):
     run, res = corridor_loop
     sc = score_map(res.map_points, run.reference_map, threshold=0.3)

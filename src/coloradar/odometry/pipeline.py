@@ -404,7 +404,7 @@ def _filter_run(seq, j: OdometryJob, main: tuple, fuse: tuple[str, ...],
         stills.append(st_r)
         clouds.append(cl_r)
     res = rio_odometry(tracks, seq.calib, seq.imu.timestamps, seq.imu.data,
-                       radars=(j.radar, *fuse), config=rcfg, groundtruth=gt, still=stills,
+                       radars=(j.radar, *fuse), config=rcfg, initial_pose=gt, still=stills,
                        points=clouds)
     return res.trajectory, tracks[1:], rio_summary(res, rcfg)
 

@@ -44,6 +44,7 @@ from .dead_reckoning import integrate_gyro
 from .doppler import DopplerConfig, PointNoise, doppler_points_index, doppler_update, point_noise_for
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
+from .rio_outputs import KeepPose, PoseOutputs, PoseState
 from .velocity_track import EgoVelocityTrack
 from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames, still_rates
 
@@ -250,6 +251,11 @@ class RioResult:
         Per output pose, bool over the rows of the first radar's cloud: the points the
         per-point gate took as static (None where the frame had no point update, or the
         filter ran without points).
+    kept
+        None: every field above is given at every pose. Else int64 ``(K,)``: the poses
+        (indices into ``trajectory``) at which ``covariance``, ``velocity``, the biases, the
+        time offsets, ``velocity_covariance`` and ``static_points`` are given (``K`` rows):
+        those a ``keep`` of :func:`rio_odometry` asked for, the anchoring pose and the last.
     """
 
     trajectory: Trajectory
@@ -268,6 +274,7 @@ class RioResult:
     stats: dict[str, dict[str, int]]
     velocity_covariance: np.ndarray | None = None
     static_points: list[np.ndarray | None] | None = None
+    kept: np.ndarray | None = None
 
 
 def _planar(track: EgoVelocityTrack) -> bool:
@@ -563,19 +570,11 @@ def _initialise(s: _Setup) -> tuple[int, float, np.ndarray]:
 class _Loop:
     """The event loop: every radar frame in time order, its update, the output poses."""
 
-    def __init__(self, s: _Setup, k0: int, t0: float, P0: np.ndarray):
+    def __init__(self, s: _Setup, k0: int, t0: float, P0: np.ndarray,
+                 keep: KeepPose | None = None):
         self.s, self.k0, self.t0, self.P0 = s, k0, t0, P0
         n_r = len(s.tracks)
-        m = len(s.tracks[0]) - k0
-        self.out_t = np.full(m, np.nan)
-        self.out_R = np.zeros((m, 3, 3))
-        self.out_p = np.zeros((m, 3))
-        self.out_v = np.zeros((m, 3))
-        self.out_cov = np.zeros((m, 6, 6))
-        self.out_b = np.zeros((m, 4, 3))
-        self.out_td = np.zeros((m, 2, n_r))
-        self.out_vcov = np.zeros((m, 3, 3))
-        self.out_masks: list[np.ndarray | None] = [None] * m
+        self.out = PoseOutputs(len(s.tracks[0]) - k0, n_r, keep, s.cfg.anchor_delay)
         self.stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0,
                           "point_updates": 0, "points": 0, "points_used": 0} for n in s.names}
         cfg = s.cfg
@@ -724,29 +723,30 @@ class _Loop:
         """Output pose ``i`` (the first radar's frame ``k``) from the filter's state."""
         s, ekf = self.s, self.s.ekf
         self.last_out = tau
-        self.out_t[i] = tau
-        self.out_R[i], self.out_p[i], self.out_v[i] = ekf.R, ekf.p, ekf.v
         rb = ekf.R @ s.imu_T_base.translation
         J = np.zeros((6, ekf.dim))
         J[:3, P] = np.eye(3)
         J[:3, TH] = -skew(rb)
         J[3:, TH] = np.eye(3)
-        self.out_cov[i] = J @ ekf.P @ J.T
         dg = np.diag(ekf.P)
-        self.out_b[i] = [ekf.ba, np.sqrt(dg[BA]), ekf.bg, np.sqrt(dg[BG])]
-        self.out_td[i, 0] = ekf.td
-        self.out_td[i, 1] = [np.sqrt(dg[ekf.td_index(j)]) for j in range(len(s.tracks))]
-        self.out_vcov[i] = ekf.P[V, V]
+        mask = None
         if used is not None and s.pts is not None:
             mask = np.zeros(s.pts[0][k][2], dtype=bool)
             mask[s.pts[0][k][1][used]] = True
-            self.out_masks[i] = mask
+        state = PoseState(ekf.v.copy(), J @ ekf.P @ J.T,
+                          np.array([ekf.ba, np.sqrt(dg[BA]), ekf.bg, np.sqrt(dg[BG])]),
+                          np.array([ekf.td, [np.sqrt(dg[ekf.td_index(j)])
+                                             for j in range(len(s.tracks))]]),
+                          ekf.P[V, V].copy(), mask)
+        base = (ekf.p + rb, ekf.R @ s.imu_T_base.rotation.as_matrix())
+        self.out.record(i, k, tau, ekf.R, ekf.p, state, base)
 
 
-def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndarray
+def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg_c: np.ndarray
                     ) -> np.ndarray:
     """The attitudes ``world_R_imu`` of the poses with the first ``anchor_delay`` seconds'
-    replaced by the attitude at ``anchor_delay`` carried back by the bias-corrected gyro.
+    replaced by the attitude at ``anchor_delay`` carried back by the gyro, corrected by the
+    bias ``bg_c`` estimated there.
 
     The first attitude estimates are the least certain (gravity aligned, possibly while
     moving); the filter's attitude a few seconds later, carried back, is better (a fixed-lag
@@ -759,7 +759,7 @@ def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndar
     sel = (s.imu_t > out_t[0]) & (s.imu_t < out_t[c])
     tg, inv = np.unique(np.concatenate([out_t[:c + 1], s.imu_t[sel]]), return_inverse=True)
     _, wg = s.ekf.imu_at(tg)
-    cum = integrate_gyro(tg, wg, bias=bg[c])            # imu(t_0)_R_imu(t)
+    cum = integrate_gyro(tg, wg, bias=bg_c)             # imu(t_0)_R_imu(t)
     pos = inv[:c + 1]
     back = cum[pos].inv() * cum[pos[-1]]                # imu(t_i)_R_imu(t_c)
     out = out_R.copy()
@@ -767,8 +767,8 @@ def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg: np.ndar
     return out
 
 
-def _anchor_covariance(c: int, pos: np.ndarray, vel: np.ndarray, cov: np.ndarray,
-                       vcov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _anchor_covariance(cov_c: np.ndarray, p0: np.ndarray, pos: np.ndarray, vel: np.ndarray,
+                       cov: np.ndarray, vcov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The output's pose and velocity covariances with the anchor's tilt error added.
 
     The output is rotated so that its first pose lies on the initial pose, and that first
@@ -781,10 +781,13 @@ def _anchor_covariance(c: int, pos: np.ndarray, vel: np.ndarray, cov: np.ndarray
 
     Parameters
     ----------
-    c
-        Index of the anchoring pose.
+    cov_c
+        float64 ``(6, 6)``: the covariance at the anchoring pose ``c``.
+    p0
+        float64 ``(3,)``: the first pose's position [m].
     pos, vel
-        float64 ``(M, 3)``: positions [m] and velocities [m/s], filter world frame.
+        float64 ``(M, 3)``: positions [m] and velocities [m/s] of the poses whose covariances
+        are given, filter world frame.
     cov, vcov
         float64 ``(M, 6, 6)`` (position, attitude) and ``(M, 3, 3)``, filter world frame.
 
@@ -793,12 +796,12 @@ def _anchor_covariance(c: int, pos: np.ndarray, vel: np.ndarray, cov: np.ndarray
     cov, vcov
         The same shapes, with the anchor's tilt error added.
     """
-    p_tilt = cov[c, 3:, 3:].copy()
+    p_tilt = cov_c[3:, 3:].copy()
     p_tilt[2, :] = 0.0
     p_tilt[:, 2] = 0.0
     m = len(pos)
     g = np.zeros((m, 6, 3))
-    g[:, :3] = -skew(pos - pos[0])
+    g[:, :3] = -skew(pos - p0)
     g[:, 3:] = np.eye(3)
     sv = skew(vel)
     cov = cov + g @ p_tilt @ g.transpose(0, 2, 1)
@@ -806,50 +809,54 @@ def _anchor_covariance(c: int, pos: np.ndarray, vel: np.ndarray, cov: np.ndarray
     return cov, vcov
 
 
-def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | None,
-            groundtruth: Trajectory | None) -> RioResult:
+def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioResult:
     """The loop's poses re-anchored at the initial pose, as a :class:`RioResult`."""
-    done = np.isfinite(lp.out_t)
+    out = lp.out
+    n = int(np.isfinite(out.t).sum())               # recorded in order: a prefix
     prim = s.tracks[0]
-    if not done.all():
-        warnings.warn(f"{prim.frame}: {int((~done).sum())} radar frames after the IMU's end; "
+    if n < out.t.size:
+        warnings.warn(f"{prim.frame}: {out.t.size - n} radar frames after the IMU's end; "
                       "left out", DataWarning, stacklevel=3)
-    out_t, out_R, out_p, out_v = (a[done] for a in (lp.out_t, lp.out_R, lp.out_p, lp.out_v))
-    out_cov, out_b, out_td = lp.out_cov[done], lp.out_b[done], lp.out_td[done]
-    masks = [mk for mk, d in zip(lp.out_masks, done, strict=True) if d] \
-        if s.pts is not None else None
-    out_R = _smoothed_start(s, out_t, out_R, out_b[:, 2])
+    out_t, out_R, out_p = out.t[:n], out.R[:n], out.p[:n]
+    kept, (out_v, out_cov, out_b, out_td, out_vcov), masks = out.states(n)
+    c = min(int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay)), n - 1)
+    ci = c if kept is None else int(np.searchsorted(kept, c))
+    out_R = _smoothed_start(s, out_t, out_R, out_b[ci, 2])
     # world_T_base in the filter's frame, then re-anchored at the initial pose.
     rot_imu = Rotation.from_matrix(out_R)
     rot_base = rot_imu * s.imu_T_base.rotation
-    pos_base = out_p + rot_imu.apply(np.tile(s.imu_T_base.translation, (len(out_p), 1)))
+    pos_base = out_p + rot_imu.apply(np.tile(s.imu_T_base.translation, (n, 1)))
+    if isinstance(initial_pose, Trajectory):
+        initial_pose = (initial_pose.at(out_t[0]) if initial_pose.covers(out_t[:1])[0]
+                        else None)
     if initial_pose is None:
-        initial_pose = (groundtruth.at(out_t[0]) if groundtruth is not None
-                        and groundtruth.covers(out_t[:1])[0] else SE3.identity())
+        initial_pose = SE3.identity()
     a_rot = initial_pose.rotation * rot_base[0].inv()
     a_t = initial_pose.translation - a_rot.apply(pos_base[0])
     traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
                       f"{s.names[0]} radar-inertial EKF")
-    c = min(int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay)), len(out_t) - 1)
-    out_cov, out_vcov = _anchor_covariance(c, pos_base, out_v, out_cov, lp.out_vcov[done])
+    sel = slice(None) if kept is None else kept
+    out_cov, out_vcov = _anchor_covariance(out_cov[ci], pos_base[0], pos_base[sel],
+                                           out_v, out_cov, out_vcov)
     am = a_rot.as_matrix()
     big = np.zeros((6, 6))
     big[:3, :3] = big[3:, 3:] = am
     phi = np.array([Rotation.from_matrix(e.rotation.as_matrix().T @ s.ekf.R_ir[r]).as_rotvec()
                     for r, e in enumerate(s.ext)])
-    return RioResult(traj, prim.timestamps[lp.k0:][done].copy(), big @ out_cov @ big.T,
-                     a_rot.apply(out_v), out_b[:, 0], out_b[:, 1], out_b[:, 2], out_b[:, 3],
-                     out_td[:, 0], out_td[:, 1], phi, s.names, s.static[0][lp.k0:][done],
-                     lp.stats, am @ out_vcov @ am.T, masks)
+    return RioResult(traj, prim.timestamps[lp.k0:lp.k0 + n].copy(), big @ out_cov @ big.T,
+                     a_rot.apply(out_v).reshape(-1, 3), out_b[:, 0], out_b[:, 1], out_b[:, 2],
+                     out_b[:, 3], out_td[:, 0], out_td[:, 1], phi, s.names,
+                     s.static[0][lp.k0:lp.k0 + n], lp.stats, am @ out_vcov @ am.T,
+                     masks if s.pts is not None else None, kept)
 
 
 def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
                  imu_timestamps: np.ndarray, imu_data: np.ndarray, *,
                  radars: Sequence[str] | None = None, config: RioConfig | None = None,
-                 initial_pose: SE3 | None = None,
-                 groundtruth: Trajectory | None = None,
+                 initial_pose: SE3 | Trajectory | None = None,
                  still: Sequence[np.ndarray] | None = None,
-                 points: Sequence[Sequence[np.ndarray]] | None = None) -> RioResult:
+                 points: Sequence[Sequence[np.ndarray]] | None = None,
+                 keep: KeepPose | None = None) -> RioResult:
     """Radar-inertial odometry of a run with the error-state EKF.
 
     Parameters
@@ -866,11 +873,10 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     config
         Filter settings (default :class:`RioConfig`).
     initial_pose
-        ``world_T_base`` of the first output pose; default the ground truth's there (when
-        given), else the identity. The filter's own world frame is gravity-aligned; the
-        output is its motion re-anchored at this pose.
-    groundtruth
-        Used only for the default ``initial_pose``.
+        ``world_T_base`` of the first output pose, or a trajectory (the ground truth) that
+        gives it at that pose's time (the identity where it does not cover it); default the
+        identity. The filter's own world frame is gravity-aligned; the output is its motion
+        re-anchored at this pose.
     still
         Per track, bool ``(M_r,)``: whether each frame's cloud shows a still world
         (:func:`~coloradar.odometry.zero_velocity.still_world`); None: judged from the
@@ -880,6 +886,11 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
         range_rate`` (radar frame): with ``config.update == "doppler"`` (the default) every
         point is a measurement of the filter (:mod:`.doppler`). None: the frames'
         ego-velocities only (loosely coupled).
+    keep
+        None: the result gives every pose's covariance, velocity, biases and offsets. Else
+        called at each pose as the filter runs (:data:`.rio_outputs.KeepPose`): those are
+        kept only where it says so (:attr:`RioResult.kept`), and the filter's memory grows
+        by about 100 bytes a pose instead of 700 or more.
 
     Returns
     -------
@@ -888,9 +899,9 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     cfg = config or RioConfig()
     s = _setup(tracks, calib, (imu_timestamps, imu_data), radars, cfg, still, points)
     k0, t0, P0 = _initialise(s)
-    loop = _Loop(s, k0, t0, P0)
+    loop = _Loop(s, k0, t0, P0, keep)
     loop.run()
-    return _result(s, loop, initial_pose, groundtruth)
+    return _result(s, loop, initial_pose)
 
 
 def _floats(a: np.ndarray, digits: int = 9) -> list:

@@ -15,8 +15,9 @@ per step (:func:`relative_covariance`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -85,8 +86,15 @@ class FrontEnd:
     summary: dict
 
 
-KeyframeRule = Callable[[Trajectory, np.ndarray], np.ndarray]
-"""``(trajectory, usable) -> int64 keyframe indices`` (:func:`.submaps.select_keyframes`)."""
+class KeyframeRule(Protocol):
+    """Chooses keyframes one pose at a time as the filter runs (:class:`.submaps.KeyframeSelector`):
+    called as :data:`coloradar.odometry.rio_outputs.KeepPose`, it gathers the keyframes' pose
+    indices in ``picked``."""
+
+    picked: list[int]
+
+    def __call__(self, index: int, frame: int, position: np.ndarray,
+                 attitude: np.ndarray) -> bool: ...
 
 
 def estimate_track(clouds: Iterable[np.ndarray], timestamps: np.ndarray, config: EgoVelocityConfig,
@@ -113,11 +121,12 @@ def estimate_track(clouds: Iterable[np.ndarray], timestamps: np.ndarray, config:
     return track, still
 
 
-def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: KeyframeRule
+def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: Sequence[int]
                       ) -> FrontEnd:
     """The :class:`FrontEnd` of a filter result and the ego-velocities that drove it: the
-    trajectory and, at the keyframes ``keyframes(trajectory, usable)`` picks, the covariance.
-    Nothing else of ``res`` is kept (drop it after this call)."""
+    trajectory and, at the ``keyframes`` (pose indices; the result must give the
+    covariance there), the covariance. Nothing else of ``res`` is kept (drop it after this
+    call)."""
     summary = {"static_frames": int(np.sum(res.static)),
                "time_offset_s": [float(x) for x in res.time_offset[-1]],
                "gyro_bias_rad_s": [float(x) for x in res.gyro_bias[-1]],
@@ -125,10 +134,14 @@ def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: Keyfra
                "stats": res.stats}
     stamps = np.asarray(res.frame_timestamps, dtype=np.float64)
     frames = np.searchsorted(track.timestamps, stamps).clip(0, len(track) - 1).astype(np.int64)
-    ok = track.ok[frames]
-    kfs = np.asarray(keyframes(res.trajectory, ok), dtype=np.int64)
-    return FrontEnd(res.trajectory, frames, ok, kfs,
-                    np.array(res.covariance[kfs], dtype=np.float64).reshape(-1, 6, 6), summary)
+    kfs = np.asarray(keyframes, dtype=np.int64)
+    rows = kfs
+    if res.kept is not None:
+        rows = np.searchsorted(res.kept, kfs).clip(0, max(res.kept.size - 1, 0))
+        if kfs.size and not np.array_equal(res.kept[rows], kfs):
+            raise ValueError("the filter's result lacks the covariance of some keyframes")
+    return FrontEnd(res.trajectory, frames, track.ok[frames], kfs,
+                    np.array(res.covariance[rows], dtype=np.float64).reshape(-1, 6, 6), summary)
 
 
 def radar_inertial_frontend(track: EgoVelocityTrack, still: np.ndarray, calib: Calibration,
@@ -140,12 +153,13 @@ def radar_inertial_frontend(track: EgoVelocityTrack, still: np.ndarray, calib: C
     ego-velocities and the IMU, as ``coloradar odometry`` runs it: with ``points`` (the
     frames' clouds ``(N_k, 5)``, e.g. :meth:`.stores.FrameStore.clouds`) every point updates
     the filter (its default, tightly coupled update). The initial pose is the ground truth's
-    when given. The filter's result is reduced to a :class:`FrontEnd` (``keyframes`` picks
-    where its covariances are kept) and freed on return."""
+    when given. ``keyframes`` chooses the keyframes as the filter runs, and the filter keeps
+    its covariance there only (``keep`` of :func:`~coloradar.odometry.rio_odometry`); its
+    result is reduced to a :class:`FrontEnd` and freed on return."""
     res = rio_odometry(track, calib, imu_timestamps, imu_data, radars=(radar,),
-                       config=config or RioConfig(), groundtruth=groundtruth, still=[still],
-                       points=None if points is None else [points])
-    return frontend_from_rio(res, track, keyframes)
+                       config=config or RioConfig(), initial_pose=groundtruth, still=[still],
+                       points=None if points is None else [points], keep=keyframes)
+    return frontend_from_rio(res, track, keyframes.picked)
 
 
 def _psd(a: np.ndarray) -> np.ndarray:

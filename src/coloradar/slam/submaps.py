@@ -6,7 +6,8 @@
 - **Frame store** (:class:`.stores.FrameStore`, seen here as :class:`StaticPoints`): each
   frame's cloud and static points, kept in a temporary file (not in memory) until the
   submaps are built, so memory stays flat in the run's length.
-- **Keyframes** (:func:`select_keyframes`): every ``keyframe_distance`` metres or
+- **Keyframes** (:class:`KeyframeSelector`, one pose at a time as the filter runs, or
+  :func:`select_keyframes` over a whole trajectory): every ``keyframe_distance`` metres or
   ``keyframe_angle_deg`` degrees of odometry motion.
 - **Submaps** (:func:`build_submap`): the static points of the frames within
   ``submap_window`` seconds of a keyframe, in the keyframe's base frame (with the odometry's
@@ -27,13 +28,15 @@ from typing import Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from ..calib import RadarCalib
 from ..geometry import SE3, Trajectory, voxel_downsample
 from .settings import SlamSettings
 
-__all__ = ["PointAccuracy", "StaticPoints", "Submap", "Submaps", "build_submap", "descriptor_distance",
-           "point_accuracy", "point_covariances", "scan_context", "select_keyframes",
+__all__ = ["KeyframeSelector", "PointAccuracy", "StaticPoints", "Submap", "Submaps",
+           "build_submap", "descriptor_distance", "point_accuracy", "point_covariances",
+           "scan_context", "select_keyframes",
            "static_mask", "static_points", "surface_covariances"]
 
 
@@ -118,22 +121,58 @@ def static_points(cloud: np.ndarray, velocity: np.ndarray, threshold: float,
     return np.asarray(cloud)[keep][:, :4].astype(np.float32)
 
 
+class KeyframeSelector:
+    """The keyframe rule, one pose at a time: the first usable pose, then each usable pose
+    ``distance`` [m] or ``angle`` [rad] away from the last keyframe's.
+
+    Called by the radar-inertial filter at each pose it outputs (``keep`` of
+    :func:`coloradar.odometry.rio_odometry`), so that SLAM's front end keeps the filter's
+    covariance at the keyframes only; :func:`select_keyframes` runs the same rule over a whole
+    trajectory. Distances and relative angles do not change under the rigid re-anchoring
+    the filter applies to its output, so both choose the same keyframes.
+
+    Parameters
+    ----------
+    usable
+        bool ``(M,)`` over the radar frames: those with an ego-velocity.
+    distance, angle
+        Thresholds [m], [rad].
+    """
+
+    def __init__(self, usable: np.ndarray, distance: float, angle: float) -> None:
+        self.usable = np.asarray(usable, dtype=bool)
+        self.distance, self.angle = float(distance), float(angle)
+        self.picked: list[int] = []
+        self._last: tuple[np.ndarray, Rotation] | None = None
+
+    def __call__(self, index: int, frame: int, position: np.ndarray,
+                 attitude: np.ndarray | Rotation) -> bool:
+        """Whether pose ``index`` (of radar frame ``frame``; ``position`` float ``(3,)`` [m],
+        ``attitude`` a rotation matrix ``(3, 3)`` or Rotation) is a keyframe; the keyframes'
+        pose indices gather in :attr:`picked`."""
+        if not self.usable[frame]:
+            return False
+        rot = attitude if isinstance(attitude, Rotation) else Rotation.from_matrix(attitude)
+        pos = np.array(position, dtype=np.float64)
+        if self._last is not None:
+            p, r = self._last
+            if np.linalg.norm(pos - p) < self.distance \
+                    and (r.inv() * rot).magnitude() < self.angle:
+                return False
+        self._last = (pos, rot)
+        self.picked.append(int(index))
+        return True
+
+
 def select_keyframes(traj: Trajectory, usable: np.ndarray, distance: float,
                      angle: float) -> np.ndarray:
-    """int64 indices of the keyframes: the first usable frame, then each usable frame whose
-    odometry pose is ``distance`` [m] or ``angle`` [rad] away from the last keyframe's."""
-    idx = np.flatnonzero(usable)
-    if idx.size == 0:
-        return idx.astype(np.int64)
-    out = [int(idx[0])]
+    """int64 indices of the keyframes of a whole trajectory (``usable``: bool ``(M,)`` per
+    pose): :class:`KeyframeSelector`'s rule."""
+    sel = KeyframeSelector(usable, distance, angle)
     p, r = traj.translations, traj.rotations
-    for k in idx[1:]:
-        last = out[-1]
-        moved = np.linalg.norm(p[k] - p[last]) >= distance
-        turned = (r[last].inv() * r[k]).magnitude() >= angle
-        if moved or turned:
-            out.append(int(k))
-    return np.asarray(out, dtype=np.int64)
+    for k in np.flatnonzero(sel.usable):
+        sel(int(k), int(k), p[k], r[k])
+    return np.asarray(sel.picked, dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)

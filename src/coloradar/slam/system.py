@@ -47,7 +47,7 @@ from .registration import register
 from .scale import NOT_ESTIMATED, ScaleEstimate, disjoint_pairs, estimate_scale
 from .settings import SlamSettings
 from .stores import FrameStore, SubmapStore
-from .submaps import Submaps, build_submap, point_accuracy, select_keyframes, static_mask
+from .submaps import KeyframeSelector, Submaps, build_submap, point_accuracy, static_mask
 
 __all__ = ["SlamResult", "build_slam_map", "correct_frames", "keyframe_trajectory", "slam_from_clouds"]
 
@@ -307,7 +307,7 @@ def _frontend(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib: Calib
     dist, ang = s.keyframe_distance, np.radians(s.keyframe_angle_deg)
     fe = radar_inertial_frontend(
         track, still, calib, imu[0], imu[1], radar=radar, groundtruth=groundtruth,
-        config=rio_config, keyframes=lambda traj, ok: select_keyframes(traj, ok, dist, ang),
+        config=rio_config, keyframes=KeyframeSelector(track.ok, dist, ang),
         points=store.clouds())
     _lap("filter", t0, tm)
     return fe
