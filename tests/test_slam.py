@@ -338,6 +338,47 @@ def test_keyframes_follow_the_rule_and_keep_the_filters_covariance(corridor_loop
     np.testing.assert_allclose(traj.translations, full.trajectory.translations, atol=1e-9)
 
 
+def test_a_loop_seen_the_other_way_is_held_loosely_along_the_path():
+    """The release of a reversed loop: ``std²`` along the direction of travel, nothing
+    across it or on rotation; none when the headings differ by 90° or less (also across the
+    ±180° wrap)."""
+    from coloradar.slam.loops import reverse_release
+
+    u = np.array([0.6, 0.8, 0.0])
+    assert reverse_release(0.0, np.radians(89.0), u, 0.3) is None
+    assert reverse_release(np.radians(175.0), np.radians(-175.0), u, 0.3) is None
+    assert reverse_release(0.0, np.pi, u, 0.0) is None
+    rel = reverse_release(np.radians(-100.0), np.radians(95.0), u, 0.3)
+    assert rel is not None and np.allclose(rel[:3], 0.0) and np.allclose(rel[:, :3], 0.0)
+    across = np.array([0.8, -0.6, 0.0])
+    assert math.isclose(u @ rel[3:, 3:] @ u, 0.09) and abs(across @ rel[3:, 3:] @ across) < 1e-15
+    assert abs(rel[5, 5]) < 1e-15
+
+
+def test_loops_seen_the_other_way_err_along_the_path_and_weigh_less_there(corridor_loop):
+    """Why the release exists, on the corridor walked 1.3 times: the accepted loops between
+    keyframes that pass the place in opposite directions are off along the path (against the
+    ground truth) by more than twice as much as those in the same direction; their factors
+    carry ``loop_reverse_along_std²`` along the direction of travel, the others do not."""
+    run, res = corridor_loop
+    std = SlamSettings().loop_reverse_along_std
+    yaw = res.keyframe_odometry.rotations.as_euler("ZYX")[:, 0]
+    truth = run.groundtruth.interpolate(res.trajectory.timestamps[res.keyframes], tolerance=1.0)
+    step = np.gradient(np.asarray(truth.translations), axis=0)
+    travel = step / np.linalg.norm(step, axis=1)[:, None]
+    rows = {True: [], False: []}
+    for lp in res.accepted_loops:
+        true = truth[lp.i].inverse() @ truth[lp.j]
+        err = truth[lp.i].rotation.apply(lp.measured.translation - true.translation)
+        u = truth[lp.j].rotation.inv().apply(travel[lp.j])
+        reversed_ = abs(np.angle(np.exp(1j * (yaw[lp.i] - yaw[lp.j])))) > np.pi / 2
+        rows[reversed_].append((abs(err @ travel[lp.j]), u @ lp.covariance[3:, 3:] @ u))
+    rev, same = np.array(rows[True]), np.array(rows[False])
+    assert len(rev) >= 3 and len(same) >= 3
+    assert rev[:, 0].mean() > 2 * same[:, 0].mean(), (rev[:, 0], same[:, 0])
+    assert np.all(rev[:, 1] >= 0.95 * std**2) and np.all(same[:, 1] < std**2)
+
+
 def test_slam_map_lies_on_the_true_surfaces(corridor_loop):
     run, res = corridor_loop
     sc = score_map(res.map_points, run.reference_map, threshold=0.3)
@@ -611,7 +652,8 @@ def test_submaps_are_built_again_at_the_measured_scale():
 
 @pytest.mark.parametrize("field, value", [("disjoint_registration", "yes"),
                                           ("robust_kernel", "tukey"), ("min_fitness", 1.5),
-                                          ("keyframe_distance", 0.0), ("scale_probe", -0.1)])
+                                          ("keyframe_distance", 0.0), ("scale_probe", -0.1),
+                                          ("loop_reverse_along_std", -0.3)])
 def test_bad_settings_say_which_field(field, value):
     from coloradar.errors import SettingsError
 

@@ -86,6 +86,10 @@ class SlamSettings:
         ``loop_gate_sigma`` standard deviations of the odometry's relative uncertainty [m].
     loop_gate_sigma
         That many standard deviations of the relative position uncertainty.
+    loop_reverse_along_std
+        A loop between keyframes whose headings differ by more than 90° (the place seen from
+        the other way) gets this standard deviation [m] added along the direction of travel
+        (:func:`.loops.reverse_release`; 0: none).
     descriptor_rings, descriptor_sectors, descriptor_range
         Scan-context grid (rings × sectors out to ``descriptor_range`` [m]).
     max_descriptor_distance
@@ -146,6 +150,7 @@ class SlamSettings:
     loop_min_separation: float = 8.0
     loop_search_radius: float = 2.0
     loop_gate_sigma: float = 3.0
+    loop_reverse_along_std: float = 0.3
     descriptor_rings: int = 10
     descriptor_sectors: int = 36
     descriptor_range: float = 10.0

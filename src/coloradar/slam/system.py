@@ -42,7 +42,14 @@ from .frontend import (
     relative_covariance,
 )
 from .graph import Edge, PoseGraph, optimize_with_consistency
-from .loops import LoopRecord, factor_floor, loop_candidates, odometry_chi2, verify_loop
+from .loops import (
+    LoopRecord,
+    factor_floor,
+    loop_candidates,
+    odometry_chi2,
+    reverse_release,
+    verify_loop,
+)
 from .registration import register
 from .scale import NOT_ESTIMATED, ScaleEstimate, disjoint_pairs, estimate_scale
 from .settings import SlamSettings
@@ -240,11 +247,20 @@ def _disjoint_edges(fe: FrontEnd, submaps: Submaps, s: SlamSettings, scale: floa
 
 def _loops(fe: FrontEnd, submaps: SubmapStore, s: SlamSettings, planar: bool
            ) -> list[LoopRecord]:
+    """Step 5: every keyframe's loop candidates, verified; a loop between keyframes that
+    pass the place in opposite directions is held loosely along the path
+    (:func:`.loops.reverse_release`)."""
     traj, kfs = fe.trajectory, fe.keyframes
     pos = traj.translations[kfs]
     path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pos, axis=0), axis=1))])
     fl_t, fl_r = s.odometry_floor_translation, np.radians(s.odometry_floor_rotation_deg)
     cov_p = fe.covariance[:, :3, :3]
+    if kfs.size < 2:
+        return []
+    rot = traj.rotations[kfs]
+    yaw = rot.as_euler("ZYX")[:, 0]
+    step = np.gradient(np.asarray(pos, dtype=np.float64), axis=0)
+    travel = rot.inv().apply(step / np.maximum(np.linalg.norm(step, axis=1), 1e-9)[:, None])
     out = []
     for j in range(kfs.size):
         for c in loop_candidates(j, pos, path, cov_p, submaps.descriptor, s):
@@ -252,7 +268,8 @@ def _loops(fe: FrontEnd, submaps: SubmapStore, s: SlamSettings, planar: bool
             rel = traj[a].inverse() @ traj[b]
             cov = relative_covariance(fe, c.i, c.j, fl_t, fl_r, steps=c.j - c.i,
                                       scale=s.odometry_cov_scale)
-            out.append(verify_loop(c, submaps, rel, cov, s, planar))
+            release = reverse_release(yaw[c.i], yaw[c.j], travel[c.j], s.loop_reverse_along_std)
+            out.append(verify_loop(c, submaps, rel, cov, s, planar, release))
     return out
 
 
