@@ -738,7 +738,8 @@ class _Loop:
                           np.array([ekf.td, [np.sqrt(dg[ekf.td_index(j)])
                                              for j in range(len(s.tracks))]]),
                           ekf.P[V, V].copy(), mask)
-        base = (ekf.p + rb, ekf.R @ s.imu_T_base.rotation.as_matrix())
+        base = None if self.out.keep is None else (
+            ekf.p + rb, ekf.R @ s.imu_T_base.rotation.as_matrix())
         self.out.record(i, k, tau, ekf.R, ekf.p, state, base)
 
 

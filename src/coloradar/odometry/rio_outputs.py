@@ -91,11 +91,11 @@ class PoseOutputs:
         self._masks: list[np.ndarray | None] = [None] * n
 
     def record(self, i: int, frame: int, tau: float, rotation: np.ndarray,
-               position: np.ndarray, state: PoseState, base: tuple[np.ndarray, np.ndarray]
-               ) -> None:
+               position: np.ndarray, state: PoseState,
+               base: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Pose ``i`` (radar frame ``frame``) at IMU time ``tau`` [s]: the IMU's attitude
         ``(3, 3)`` and position ``(3,)`` [m], its state, and ``base``: the base's position
-        and attitude (what ``keep`` is shown)."""
+        and attitude (what ``keep`` is shown; needed only with ``keep``)."""
         self.t[i], self.R[i], self.p[i] = tau, rotation, position
         if self.anchor is None and tau >= self.t[0] + self.anchor_delay:
             self.anchor = i
@@ -104,7 +104,7 @@ class PoseOutputs:
             self._td[i], self._vcov[i] = state.time_offset, state.velocity_covariance
             self._masks[i] = state.mask
             return
-        if self.keep(i, frame, *base) or i == self.anchor:
+        if (base is not None and self.keep(i, frame, *base)) or i == self.anchor:
             self._rows[i] = state
         self._last = (i, state)
 
