@@ -575,6 +575,7 @@ class _Loop:
         self.s, self.k0, self.t0, self.P0 = s, k0, t0, P0
         n_r = len(s.tracks)
         self.out = PoseOutputs(len(s.tracks[0]) - k0, n_r, keep, s.cfg.anchor_delay)
+        self.imu_R_base = s.imu_T_base.rotation.as_matrix()   # for the base pose keep is shown
         self.stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0,
                           "point_updates": 0, "points": 0, "points_used": 0} for n in s.names}
         cfg = s.cfg
@@ -738,8 +739,7 @@ class _Loop:
                           np.array([ekf.td, [np.sqrt(dg[ekf.td_index(j)])
                                              for j in range(len(s.tracks))]]),
                           ekf.P[V, V].copy(), mask)
-        base = None if self.out.keep is None else (
-            ekf.p + rb, ekf.R @ s.imu_T_base.rotation.as_matrix())
+        base = None if self.out.keep is None else (ekf.p + rb, ekf.R @ self.imu_R_base)
         self.out.record(i, k, tau, ekf.R, ekf.p, state, base)
 
 

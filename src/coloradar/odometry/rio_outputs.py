@@ -128,7 +128,7 @@ class PoseOutputs:
         rows = dict(self._rows)
         if self._last is not None:
             rows.setdefault(*self._last)
-        kept = np.array(sorted(i for i in rows if i < n), dtype=np.int64)
+        kept = np.array(sorted(rows), dtype=np.int64)      # recorded in order: all < n
         st = [rows[int(i)] for i in kept]
         arrays = (np.array([s.velocity for s in st]).reshape(-1, 3),
                   np.array([s.covariance for s in st]).reshape(-1, 6, 6),

@@ -6,9 +6,8 @@
 - **Frame store** (:class:`.stores.FrameStore`, seen here as :class:`StaticPoints`): each
   frame's cloud and static points, kept in a temporary file (not in memory) until the
   submaps are built, so memory stays flat in the run's length.
-- **Keyframes** (:class:`KeyframeSelector`, one pose at a time as the filter runs, or
-  :func:`select_keyframes` over a whole trajectory): every ``keyframe_distance`` metres or
-  ``keyframe_angle_deg`` degrees of odometry motion.
+- **Keyframes** (:class:`KeyframeSelector`, one pose at a time as the filter runs): every
+  ``keyframe_distance`` metres or ``keyframe_angle_deg`` degrees of odometry motion.
 - **Submaps** (:func:`build_submap`): the static points of the frames within
   ``submap_window`` seconds of a keyframe, in the keyframe's base frame (with the odometry's
   relative poses), with per-point covariances from range and angle accuracy
@@ -36,7 +35,7 @@ from .settings import SlamSettings
 
 __all__ = ["KeyframeSelector", "PointAccuracy", "StaticPoints", "Submap", "Submaps",
            "build_submap", "descriptor_distance", "point_accuracy", "point_covariances",
-           "scan_context", "select_keyframes",
+           "scan_context",
            "static_mask", "static_points", "surface_covariances"]
 
 
@@ -127,9 +126,9 @@ class KeyframeSelector:
 
     Called by the radar-inertial filter at each pose it outputs (``keep`` of
     :func:`coloradar.odometry.rio_odometry`), so that SLAM's front end keeps the filter's
-    covariance at the keyframes only; :func:`select_keyframes` runs the same rule over a whole
-    trajectory. Distances and relative angles do not change under the rigid re-anchoring
-    the filter applies to its output, so both choose the same keyframes.
+    covariance at the keyframes only. It sees the filter's poses before their rigid
+    re-anchoring, which changes no distance or relative angle: the keyframes obey the rule
+    on the output trajectory too.
 
     Parameters
     ----------
@@ -146,13 +145,13 @@ class KeyframeSelector:
         self._last: tuple[np.ndarray, Rotation] | None = None
 
     def __call__(self, index: int, frame: int, position: np.ndarray,
-                 attitude: np.ndarray | Rotation) -> bool:
+                 attitude: np.ndarray) -> bool:
         """Whether pose ``index`` (of radar frame ``frame``; ``position`` float ``(3,)`` [m],
-        ``attitude`` a rotation matrix ``(3, 3)`` or Rotation) is a keyframe; the keyframes'
-        pose indices gather in :attr:`picked`."""
+        ``attitude`` a rotation matrix ``(3, 3)``) is a keyframe; the keyframes' pose indices
+        gather in :attr:`picked`."""
         if not self.usable[frame]:
             return False
-        rot = attitude if isinstance(attitude, Rotation) else Rotation.from_matrix(attitude)
+        rot = Rotation.from_matrix(attitude)
         pos = np.array(position, dtype=np.float64)
         if self._last is not None:
             p, r = self._last
@@ -162,17 +161,6 @@ class KeyframeSelector:
         self._last = (pos, rot)
         self.picked.append(int(index))
         return True
-
-
-def select_keyframes(traj: Trajectory, usable: np.ndarray, distance: float,
-                     angle: float) -> np.ndarray:
-    """int64 indices of the keyframes of a whole trajectory (``usable``: bool ``(M,)`` per
-    pose): :class:`KeyframeSelector`'s rule."""
-    sel = KeyframeSelector(usable, distance, angle)
-    p, r = traj.translations, traj.rotations
-    for k in np.flatnonzero(sel.usable):
-        sel(int(k), int(k), p[k], r[k])
-    return np.asarray(sel.picked, dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)
