@@ -405,9 +405,14 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
         assert info["radar"] == "single_chip" and info["summary"]["keyframes"] >= 5
         assert set(info["summary"]["odometry_scale"]) == {"scale", "measured", "std", "pairs",
                                                           "used"}
-        # One odometry factor per keyframe step; the single chip gets no disjoint factors.
-        assert info["summary"]["factors"] == {"odometry": info["summary"]["keyframes"] - 1,
-                                              "registration": 0, "loop": 0}
+        # One odometry factor per keyframe step; at most one refinement factor beside each
+        # (the single chip gets no disjoint factors).
+        f, n = info["summary"]["factors"], info["summary"]["keyframes"]
+        assert f["odometry"] == n - 1 and 0 < f["registration"] <= n - 1 and f["loop"] == 0
+        assert main(["slam", str(folder), "--out", str(tmp_path / "plain"), "--no-plot",
+                     "--no-refine-odometry", "--quiet"]) == 0
+        plain = json.loads((tmp_path / "plain" / "slam.json").read_text())["summary"]
+        assert plain["factors"]["registration"] == 0
         rows = [ln for ln in (out / "trajectory.txt").read_text().splitlines()
                 if ln and not ln.startswith("#")]
         assert len(rows) == info["summary"]["frames"]
@@ -576,6 +581,7 @@ def test_disjoint_submap_factors_hold_the_drift_of_an_open_path():
         dyaw = kf.rotations.as_euler("zyx")[:, 0]
         return float(np.abs(dz).max()), float(np.degrees(np.abs(dyaw).max()))
 
+    s = replace(s, refine_odometry=False)   # its own test below
     z_off, yaw_off = errors(replace(s, disjoint_registration="never"))
     z_on, yaw_on = errors(s)
     assert z_off == pytest.approx(0.59, abs=0.01) and yaw_off == pytest.approx(2.95, abs=0.01)
@@ -586,6 +592,56 @@ def test_disjoint_submap_factors_hold_the_drift_of_an_open_path():
     # chip) keeps its odometry here.
     assert errors(s, planar=True) == pytest.approx((z_off, yaw_off), abs=1e-6)
     assert errors(replace(s, disjoint_registration="always"), planar=True)[1] < 0.5 * yaw_off
+
+
+def test_refinement_factors_measure_each_step_and_a_bad_one_is_left_out():
+    """Keyframes every metre along a street with an odometry whose heading drifts 0.05° a
+    metre; each submap the scene seen from the keyframe's true pose. With
+    ``refine_odometry`` each step gets a second factor, the registration of consecutive
+    submaps: it measures the true step (within its covariance, the χ² 0.999 quantile of 6
+    dof) and the graph's heading ends nearer the truth than the odometry's. A step whose
+    submap is displaced by 0.5 m (a registration the odometry contradicts) gets no factor."""
+    from scipy.stats import chi2
+
+    from coloradar.geometry import SE3, Trajectory
+    from coloradar.slam.frontend import FrontEnd
+    from coloradar.slam.system import _odometry_edges, _optimise
+
+    rng = np.random.default_rng(11)
+    scene = _street(rng)
+    x = np.arange(0.0, 40.0, 1.0)
+    true_pos = np.column_stack([x, np.zeros(x.size), np.full(x.size, 1.0)])
+    s = replace(SlamSettings(), disjoint_registration="never")
+    submaps = _street_submaps(scene, true_pos, rng, s)
+    bad = 20
+    submaps[bad] = Submap(0, submaps[bad].points + np.array([0.0, 0.5, 0.0]), submaps[bad].intensity,
+                          submaps[bad].covariances, submaps[bad].descriptor)
+    yaw = np.radians(0.05) * x
+    step = np.column_stack([np.cos(yaw), np.sin(yaw), np.zeros(x.size)])
+    odo_pos = true_pos[0] + np.concatenate([[np.zeros(3)], np.cumsum(step[:-1], axis=0)])
+    odo = Trajectory(x / 1.4, odo_pos, Rotation.from_rotvec(np.outer(yaw, [0.0, 0.0, 1.0])),
+                     name="odometry")
+    k = np.arange(x.size)[:, None, None]
+    cov = k * np.diag([1e-4] * 3 + [np.radians(0.1) ** 2] * 3)
+    fe = FrontEnd(odo, np.arange(x.size), np.ones(x.size, bool), np.arange(x.size), cov, {})
+
+    edges = _odometry_edges(fe, submaps, s)
+    reg = [e for e in edges if e.kind == "registration"]
+    assert {(e.i, e.j) for e in reg} == {(n - 1, n) for n in range(1, x.size)
+                                         if n not in (bad, bad + 1)}
+    limit = chi2.ppf(0.999, 6)
+    for e in reg:   # the true step: no rotation, the true positions' difference
+        d = SE3(Rotation.identity(), true_pos[e.j] - true_pos[e.i]).inverse() @ e.measured
+        v = np.concatenate([d.rotation.as_rotvec(), d.translation])
+        assert float(v @ np.linalg.solve(e.covariance, v)) < limit, (e.i, e.j)
+
+    def yaw_error(settings: SlamSettings) -> float:
+        _, kf, _ = _optimise(fe, submaps, settings, [])
+        return float(np.degrees(np.abs(kf.rotations.as_euler("zyx")[:, 0]).max()))
+
+    off = yaw_error(replace(s, refine_odometry=False))
+    assert off == pytest.approx(np.degrees(yaw[-1]), abs=1e-3)
+    assert yaw_error(s) < 0.5 * off, (yaw_error(s), off)
 
 
 def test_submaps_are_built_again_at_the_measured_scale():

@@ -34,8 +34,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a keyframe every M metres (default 1)")
     p.add_argument("--keyframe-angle", type=positive_float, default=15.0, metavar="DEG",
                    help="or every DEG degrees of turn (default 15)")
-    p.add_argument("--refine-odometry", action="store_true",
-                   help="also register consecutive keyframe submaps (scan-to-submap factors)")
+    p.add_argument("--refine-odometry", action=argparse.BooleanOptionalAction, default=True,
+                   help="also register consecutive keyframe submaps and add the results as "
+                        "gated factors beside the odometry's (scan-to-submap refinement; "
+                        "default on)")
     p.add_argument("--disjoint-registration", choices=("elevation", "always", "never"),
                    default="elevation",
                    help="register keyframes whose submaps share no frame and add the results "

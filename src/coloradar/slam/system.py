@@ -7,8 +7,8 @@
 3. Keyframes and their submaps (:mod:`.submaps`).
 4. The odometry's scale, from registrations of keyframes whose submaps share no frame
    (:mod:`.scale`), and the submaps built again at it (:func:`_scale`); odometry factors
-   between consecutive keyframes, their translations so scaled; optionally a registration
-   factor beside each (``refine_odometry``), kept when it agrees with the odometry;
+   between consecutive keyframes, their translations so scaled; a registration factor
+   beside each (``refine_odometry``, on by default), kept when it agrees with the odometry;
    registration factors between keyframes whose submaps share no frame
    (``disjoint_registration``, :func:`_disjoint_edges`).
 5. Loop candidates, verified (:mod:`.loops`); for a radar with fewer than 3 elevation rows
