@@ -599,8 +599,10 @@ def test_refinement_factors_measure_each_step_and_a_bad_one_is_left_out():
     metre; each submap the scene seen from the keyframe's true pose. With
     ``refine_odometry`` each step gets a second factor, the registration of consecutive
     submaps: it measures the true step (within its covariance, the χ² 0.999 quantile of 6
-    dof) and the graph's heading ends nearer the truth than the odometry's. A step whose
-    submap is displaced by 0.5 m (a registration the odometry contradicts) gets no factor."""
+    dof) and the graph's heading ends nearer the truth than the odometry's. A keyframe whose
+    submap is displaced by 0.5 m gets no such factor on either side (registrations the
+    odometry contradicts). (Here the submaps are independent of the odometry; in a run they
+    share most of their frames, docs/slam.md step 7.)"""
     from scipy.stats import chi2
 
     from coloradar.geometry import SE3, Trajectory
@@ -614,8 +616,9 @@ def test_refinement_factors_measure_each_step_and_a_bad_one_is_left_out():
     s = replace(SlamSettings(), disjoint_registration="never")
     submaps = _street_submaps(scene, true_pos, rng, s)
     bad = 20
-    submaps[bad] = Submap(0, submaps[bad].points + np.array([0.0, 0.5, 0.0]), submaps[bad].intensity,
-                          submaps[bad].covariances, submaps[bad].descriptor)
+    m = submaps[bad]
+    submaps[bad] = Submap(0, m.points + np.array([0.0, 0.5, 0.0]), m.intensity, m.covariances,
+                          m.descriptor)
     yaw = np.radians(0.05) * x
     step = np.column_stack([np.cos(yaw), np.sin(yaw), np.zeros(x.size)])
     odo_pos = true_pos[0] + np.concatenate([[np.zeros(3)], np.cumsum(step[:-1], axis=0)])
