@@ -546,13 +546,25 @@ def test_a_featureless_corridor_measures_no_scale():
     assert not est.used and est.scale == 1.0, est
 
 
+def _drifting_odometry(x: np.ndarray, start: np.ndarray, climb: float):
+    """Keyframe odometry along a straight street (keyframes at ``x`` metres, 1.4 m/s) whose
+    heading drifts 0.05° a metre (the path bends) and which climbs ``climb`` metres a
+    metre: the heading per keyframe [rad] and the trajectory."""
+    from coloradar.geometry import Trajectory
+
+    yaw = np.radians(0.05) * x
+    step = np.column_stack([np.cos(yaw), np.sin(yaw), np.full(x.size, climb)])
+    pos = start + np.concatenate([[np.zeros(3)], np.cumsum(step[:-1], axis=0)])
+    return yaw, Trajectory(x / 1.4, pos, Rotation.from_rotvec(np.outer(yaw, [0.0, 0.0, 1.0])),
+                           name="odometry")
+
+
 def test_disjoint_submap_factors_hold_the_drift_of_an_open_path():
     """Keyframes every metre along a street (no revisit, so no loop) with an odometry that
     climbs 1 cm and turns 0.05° a metre. Registering keyframes whose submaps share no frame
     measures the true motion between them (the scene is seen from the true poses), so with
     those factors the graph's keyframes end nearer the truth than the odometry's, in height
     and in heading; without them the graph is the odometry."""
-    from coloradar.geometry import Trajectory
     from coloradar.slam.frontend import FrontEnd
     from coloradar.slam.system import _optimise
 
@@ -563,11 +575,7 @@ def test_disjoint_submap_factors_hold_the_drift_of_an_open_path():
     s = SlamSettings()
     submaps = _street_submaps(scene, true_pos, rng, s)
     # The odometry: heading drifting 0.05° a metre (the path bends), height 1 cm a metre.
-    yaw = np.radians(0.05) * x
-    step = np.column_stack([np.cos(yaw), np.sin(yaw), np.full(x.size, 0.01)])
-    odo_pos = true_pos[0] + np.concatenate([[np.zeros(3)], np.cumsum(step[:-1], axis=0)])
-    odo = Trajectory(x / 1.4, odo_pos, Rotation.from_rotvec(np.outer(yaw, [0.0, 0.0, 1.0])),
-                     name="odometry")
+    _, odo = _drifting_odometry(x, true_pos[0], 0.01)
     # Marginal covariances as the filter's: position and heading growing by (1 cm)² and
     # (0.1°)² a metre (the drift is within them), roll and pitch held by gravity.
     k = np.arange(x.size)[:, None, None]
@@ -605,7 +613,7 @@ def test_refinement_factors_measure_each_step_and_a_bad_one_is_left_out():
     share most of their frames, docs/slam.md step 7.)"""
     from scipy.stats import chi2
 
-    from coloradar.geometry import SE3, Trajectory
+    from coloradar.geometry import SE3
     from coloradar.slam.frontend import FrontEnd
     from coloradar.slam.system import _odometry_edges, _optimise
 
@@ -619,11 +627,7 @@ def test_refinement_factors_measure_each_step_and_a_bad_one_is_left_out():
     m = submaps[bad]
     submaps[bad] = Submap(0, m.points + np.array([0.0, 0.5, 0.0]), m.intensity, m.covariances,
                           m.descriptor)
-    yaw = np.radians(0.05) * x
-    step = np.column_stack([np.cos(yaw), np.sin(yaw), np.zeros(x.size)])
-    odo_pos = true_pos[0] + np.concatenate([[np.zeros(3)], np.cumsum(step[:-1], axis=0)])
-    odo = Trajectory(x / 1.4, odo_pos, Rotation.from_rotvec(np.outer(yaw, [0.0, 0.0, 1.0])),
-                     name="odometry")
+    yaw, odo = _drifting_odometry(x, true_pos[0], 0.0)
     k = np.arange(x.size)[:, None, None]
     cov = k * np.diag([1e-4] * 3 + [np.radians(0.1) ** 2] * 3)
     fe = FrontEnd(odo, np.arange(x.size), np.ones(x.size, bool), np.arange(x.size), cov, {})
