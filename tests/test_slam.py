@@ -266,10 +266,12 @@ def corridor_loop():
 
 
 def test_slam_closes_the_corridor_loop_with_true_loops_only(corridor_loop):
-    """Every accepted loop's relative pose is the ground truth's: horizontally within 0.3 m
-    (a false loop would be metres off; the single chip's loops leave height free), and within
-    its own covariance (the χ² 0.999 quantile of 6 dof: the graph weighs it by that); and the
-    trajectory is not made worse."""
+    """Every accepted loop's relative pose is the ground truth's: horizontally within 0.5 m
+    (a false loop would be metres off; the single chip's loops leave height free; along a
+    corridor a registration of fitness near the bar can be 0.2–0.35 m off, which its
+    covariance, long along the corridor, must then say), and within its own covariance (the
+    χ² 0.999 quantile of 6 dof: the graph weighs it by that); and the trajectory is not made
+    worse."""
     from scipy.stats import chi2
 
     from coloradar.odometry.metrics import absolute_trajectory_error
@@ -281,7 +283,7 @@ def test_slam_closes_the_corridor_loop_with_true_loops_only(corridor_loop):
     for lp in acc:   # every accepted loop agrees with the ground truth's relative pose
         ti, tj = (res.trajectory.timestamps[res.keyframes[k]] for k in (lp.i, lp.j))
         true_rel = gt.at(ti).inverse() @ gt.at(tj)
-        assert np.linalg.norm((true_rel.translation - lp.measured.translation)[:2]) < 0.3
+        assert np.linalg.norm((true_rel.translation - lp.measured.translation)[:2]) < 0.5
         d = true_rel.inverse() @ lp.measured
         v = np.concatenate([d.rotation.as_rotvec(), d.translation])
         assert float(v @ np.linalg.solve(lp.covariance, v)) < chi2.ppf(0.999, 6)
@@ -306,12 +308,13 @@ def test_keyframes_follow_the_rule_and_keep_the_filters_covariance(corridor_loop
     (checked here pose by pose: each keyframe is the first usable pose ``keyframe_distance``
     or ``keyframe_angle_deg`` from the previous one; the first seconds' attitudes, smoothed
     after the filter saw them, are left out); their covariances are those the filter gives
-    there when it keeps every pose's."""
-    from coloradar.odometry import rio_odometry
+    there when it keeps every pose's, and so are its poses, smoothed and not."""
+    from coloradar.odometry import RioConfig, rio_odometry
 
     run, res = corridor_loop
     fe, st = res.frontend, SlamSettings()
-    traj, kfs = fe.trajectory, fe.keyframes
+    assert st.smooth_frontend and fe.filtered is not None and fe.filtered is res.odometry
+    traj, kfs = fe.filtered, fe.keyframes     # the poses the filter saw as it chose them
     t = traj.timestamps
     start = int(np.searchsorted(kfs, np.searchsorted(t, t[0] + 6.0)))
     p, r = np.asarray(traj.translations), traj.rotations
@@ -333,9 +336,11 @@ def test_keyframes_follow_the_rule_and_keep_the_filters_covariance(corridor_loop
                                       frame="single_chip")
         full = rio_odometry(track, run.calib, run.imu_timestamps, run.imu_data,
                             radars=("single_chip",), initial_pose=run.groundtruth,
-                            still=[still], points=[run.clouds])
+                            still=[still], points=[run.clouds], config=RioConfig(smooth=True))
     np.testing.assert_allclose(fe.covariance, full.covariance[kfs], rtol=1e-9, atol=1e-14)
-    np.testing.assert_allclose(traj.translations, full.trajectory.translations, atol=1e-9)
+    np.testing.assert_allclose(traj.translations, full.filtered.translations, atol=1e-9)
+    np.testing.assert_allclose(fe.trajectory.translations, full.trajectory.translations,
+                               atol=1e-9)
 
 
 def test_a_loop_seen_the_other_way_is_held_loosely_along_the_path():
@@ -410,9 +415,20 @@ def test_slam_command_writes_what_evaluate_reads(tmp_path, capsys):
         f, n = info["summary"]["factors"], info["summary"]["keyframes"]
         assert f["odometry"] == n - 1 and 0 < f["registration"] <= n - 1 and f["loop"] == 0
         assert main(["slam", str(folder), "--out", str(tmp_path / "plain"), "--no-plot",
-                     "--no-refine-odometry", "--quiet"]) == 0
-        plain = json.loads((tmp_path / "plain" / "slam.json").read_text())["summary"]
+                     "--no-refine-odometry", "--no-smooth-frontend", "--quiet"]) == 0
+        plain_info = json.loads((tmp_path / "plain" / "slam.json").read_text())
+        plain = plain_info["summary"]
         assert plain["factors"]["registration"] == 0
+        assert info["settings"]["smooth_frontend"] and not plain_info["settings"]["smooth_frontend"]
+
+        def keyframe_gap(folder):   # keyframes.csv's front end against odometry.txt (the filter)
+            odo = np.loadtxt(folder / "odometry.txt")
+            kf = np.loadtxt(folder / "keyframes.csv", delimiter=",", ndmin=2)
+            rows = np.searchsorted(odo[:, 0], kf[:, 2] - 5e-7)
+            return np.abs(odo[rows, 1:4] - kf[:, 10:13]).max()
+
+        # Smoothed, the keyframes' front-end poses are not the filter's; unsmoothed they are.
+        assert keyframe_gap(out) > 1e-4 and keyframe_gap(tmp_path / "plain") < 2e-6
         rows = [ln for ln in (out / "trajectory.txt").read_text().splitlines()
                 if ln and not ln.startswith("#")]
         assert len(rows) == info["summary"]["frames"]

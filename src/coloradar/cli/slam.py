@@ -34,6 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a keyframe every M metres (default 1)")
     p.add_argument("--keyframe-angle", type=positive_float, default=15.0, metavar="DEG",
                    help="or every DEG degrees of turn (default 15)")
+    p.add_argument("--smooth-frontend", action=argparse.BooleanOptionalAction, default=True,
+                   help="smooth the radar-inertial filter's poses with the later frames too "
+                        "(Rauch-Tung-Striebel) before they become odometry factors (default on)")
     p.add_argument("--refine-odometry", action=argparse.BooleanOptionalAction, default=True,
                    help="also register consecutive keyframe submaps and add the results as "
                         "gated factors beside the odometry's (scan-to-submap refinement; "
@@ -61,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     settings = replace(SlamSettings(), keyframe_distance=args.keyframe_distance,
                        keyframe_angle_deg=args.keyframe_angle,
                        refine_odometry=args.refine_odometry,
+                       smooth_frontend=args.smooth_frontend,
                        disjoint_registration=args.disjoint_registration)
     check_input(args.run)
     check_output_outside_dataset(args.out, (args.run, args.calib))

@@ -173,6 +173,7 @@ class ErrorStateEKF:
         q[BG] = noise.gyro_bias_walk**2
         self._q = q                                   # per second
         self._q_extra = np.zeros(self.dim)            # random walks of t_d, φ (per second)
+        self.transition = np.eye(self.dim)            # Φ of the last propagation (smoother)
 
     @classmethod
     def from_array(cls, imu_t: np.ndarray, imu: np.ndarray, noise: ImuNoise,
@@ -220,7 +221,10 @@ class ErrorStateEKF:
 
     # -- propagation -------------------------------------------------------------------------
     def propagate(self, t_end: float) -> None:
-        """Propagate the nominal state and covariance from ``self.t`` to ``t_end``."""
+        """Propagate the nominal state and covariance from ``self.t`` to ``t_end``; the
+        interval's transition ``Φ`` is left in :attr:`transition` (the identity when no time
+        passed)."""
+        self.transition = np.eye(self.dim)
         if t_end <= self.t:
             return
         i0 = int(np.searchsorted(self.imu_t, self.t, side="right"))
@@ -267,6 +271,7 @@ class ErrorStateEKF:
         qd = np.zeros((n, self.dim, self.dim))
         qd[:, np.arange(self.dim), np.arange(self.dim)] = (self._q + self._q_extra) * dt[:, None]
         f, q = _compose_transitions(phi, qd)
+        self.transition = f
         pm = f @ self.P @ f.T + q
         self.P = 0.5 * (pm + pm.T)
         self.t = t_end

@@ -45,6 +45,7 @@ from .doppler import DopplerConfig, PointNoise, doppler_points_index, doppler_up
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
 from .rio_outputs import KeepPose, PoseOutputs, PoseState
+from .smoother import RtsSmoother
 from .velocity_track import EgoVelocityTrack
 from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames, still_rates
 
@@ -153,6 +154,10 @@ class RioConfig:
     point_noise
         Per radar (in the order of the tracks) the points' noise; None: each radar's default
         (:func:`~coloradar.odometry.doppler.point_noise_for`).
+    smooth
+        Offline: the poses smoothed with the later measurements too (Rauch–Tung–Striebel,
+        :mod:`.smoother`); covariances, velocities and biases stay the filter's. Off by
+        default (``coloradar odometry`` is causal); SLAM's front end turns it on.
     """
 
     accel_noise_density: float = 100e-6 * _G0
@@ -182,6 +187,7 @@ class RioConfig:
     update: str = "doppler"
     doppler: DopplerConfig = field(default_factory=DopplerConfig)
     point_noise: tuple[PointNoise, ...] | None = None
+    smooth: bool = False
 
     def __post_init__(self) -> None:
         for name in ("accel_noise_density", "gyro_noise_density", "accel_bias_walk",
@@ -256,6 +262,9 @@ class RioResult:
         (indices into ``trajectory``) at which ``covariance``, ``velocity``, the biases, the
         time offsets, ``velocity_covariance`` and ``static_points`` are given (``K`` rows):
         those a ``keep`` of :func:`rio_odometry` asked for, the anchoring pose and the last.
+    filtered
+        With ``RioConfig.smooth``: the filter's own poses (causal, as without it), anchored
+        alike; ``trajectory`` is then the smoothed one. None otherwise.
     """
 
     trajectory: Trajectory
@@ -275,6 +284,7 @@ class RioResult:
     velocity_covariance: np.ndarray | None = None
     static_points: list[np.ndarray | None] | None = None
     kept: np.ndarray | None = None
+    filtered: Trajectory | None = None
 
 
 def _planar(track: EgoVelocityTrack) -> bool:
@@ -571,10 +581,13 @@ class _Loop:
     """The event loop: every radar frame in time order, its update, the output poses."""
 
     def __init__(self, s: _Setup, k0: int, t0: float, P0: np.ndarray,
-                 keep: KeepPose | None = None):
+                 keep: KeepPose | None = None, smoother: RtsSmoother | None = None):
         self.s, self.k0, self.t0, self.P0 = s, k0, t0, P0
         n_r = len(s.tracks)
         self.out = PoseOutputs(len(s.tracks[0]) - k0, n_r, keep, s.cfg.anchor_delay)
+        self.smoother = smoother
+        self.filtered: tuple[np.ndarray, np.ndarray] | None = None   # (p, R) when smoothed
+        self.at = np.zeros(len(s.tracks[0]) - k0, dtype=np.int64)    # poses' smoother states
         self.imu_R_base = s.imu_T_base.rotation.as_matrix()   # for the base pose keep is shown
         self.stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0,
                           "point_updates": 0, "points": 0, "points_used": 0} for n in s.names}
@@ -608,8 +621,8 @@ class _Loop:
             yield float(s.tracks[r].timestamps[k]), r, k
 
     def run(self) -> None:
-        """Propagate to each frame and update with it."""
-        s, ekf = self.s, self.s.ekf
+        """Propagate to each frame and update with it; with a smoother, smooth the poses."""
+        s, ekf, sm = self.s, self.s.ekf, self.smoother
         for stamp, r, k in self.events():
             want = stamp + ekf.td[r]
             tau = max(want, ekf.t)
@@ -617,8 +630,12 @@ class _Loop:
                 tau = self.last_out + 1e-6        # poses strictly in time order
             if tau > s.imu_t[-1]:
                 break
+            if sm is not None:
+                sm.before(ekf)
             ekf.propagate(tau)
-            self._release_calibration(r, tau)
+            released = self._release_calibration(r, tau)
+            if sm is not None:
+                sm.after(ekf, released)
             st = self.stats[s.names[r]]
             used = None
             # A frame found static whose zero-velocity update the filter rejects (a rig
@@ -643,23 +660,32 @@ class _Loop:
                 st["failed"] += 1
             if r == 0:
                 self._record(k - self.k0, tau, k, used)
+        if sm is not None:
+            n = int(np.isfinite(self.out.t).sum())
+            self.filtered = (self.out.p[:n].copy(), self.out.R[:n].copy())
+            self.out.p[:n], self.out.R[:n] = sm.smoothed_poses(ekf, self.at[:n])
 
-    def _release_calibration(self, r: int, tau: float) -> None:
+    def _release_calibration(self, r: int, tau: float) -> list[int]:
         """Start estimating radar ``r``'s time offset and extrinsic rotation after their
-        warm-ups: right after the start, errors of the initial state would be read as them."""
+        warm-ups: right after the start, errors of the initial state would be read as them.
+        Returns the error-state indices released now."""
         ekf, cfg = self.s.ekf, self.s.cfg
+        released: list[int] = []
         if cfg.estimate_time_offset and not self.td_on[r] \
                 and tau - self.t0 >= cfg.time_offset_warmup:
             j = ekf.td_index(r)
             ekf.P[j, :] = ekf.P[:, j] = 0.0
             ekf.P[j, j] = cfg.time_offset_std**2
             self.td_on[r] = True
+            released.append(j)
         if cfg.estimate_extrinsic_rotation and not self.ext_on[r] \
                 and tau - self.t0 >= cfg.extrinsic_warmup:
             sl = ekf.phi_slice(r)
             ekf.P[sl, :] = ekf.P[:, sl] = 0.0
             ekf.P[sl, sl] = np.diag(self.P0[sl])
             self.ext_on[r] = True
+            released += list(range(sl.start, sl.stop))
+        return released
 
     def _zero_velocity(self, tau: float, st: dict[str, int]) -> bool:
         """A static frame: zero-velocity update and zero-rate update of the gyro bias; returns
@@ -724,6 +750,8 @@ class _Loop:
         """Output pose ``i`` (the first radar's frame ``k``) from the filter's state."""
         s, ekf = self.s, self.s.ekf
         self.last_out = tau
+        if self.smoother is not None:
+            self.at[i] = self.smoother.pose_at()
         rb = ekf.R @ s.imu_T_base.translation
         J = np.zeros((6, ekf.dim))
         J[:3, P] = np.eye(3)
@@ -822,20 +850,28 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioR
     kept, (out_v, out_cov, out_b, out_td, out_vcov), masks = out.states(n)
     c = min(int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay)), n - 1)
     ci = c if kept is None else int(np.searchsorted(kept, c))
-    out_R = _smoothed_start(s, out_t, out_R, out_b[ci, 2])
-    # world_T_base in the filter's frame, then re-anchored at the initial pose.
-    rot_imu = Rotation.from_matrix(out_R)
-    rot_base = rot_imu * s.imu_T_base.rotation
-    pos_base = out_p + rot_imu.apply(np.tile(s.imu_T_base.translation, (n, 1)))
     if isinstance(initial_pose, Trajectory):
         initial_pose = (initial_pose.at(out_t[0]) if initial_pose.covers(out_t[:1])[0]
                         else None)
     if initial_pose is None:
         initial_pose = SE3.identity()
-    a_rot = initial_pose.rotation * rot_base[0].inv()
-    a_t = initial_pose.translation - a_rot.apply(pos_base[0])
-    traj = Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base,
-                      f"{s.names[0]} radar-inertial EKF")
+    pose0 = initial_pose
+
+    def anchored(out_p: np.ndarray, out_R: np.ndarray, name: str
+                 ) -> tuple[Trajectory, np.ndarray, Rotation]:
+        # world_T_base in the filter's frame, then re-anchored at the initial pose.
+        rot_imu = Rotation.from_matrix(_smoothed_start(s, out_t, out_R, out_b[ci, 2]))
+        rot_base = rot_imu * s.imu_T_base.rotation
+        pos_base = out_p + rot_imu.apply(np.tile(s.imu_T_base.translation, (n, 1)))
+        a_rot = pose0.rotation * rot_base[0].inv()
+        a_t = pose0.translation - a_rot.apply(pos_base[0])
+        return (Trajectory(out_t, a_t + a_rot.apply(pos_base), a_rot * rot_base, name),
+                pos_base, a_rot)
+
+    traj, pos_base, a_rot = anchored(out_p, out_R, f"{s.names[0]} radar-inertial "
+                                     + ("EKF, smoothed" if lp.filtered else "EKF"))
+    filtered = (None if lp.filtered is None else
+                anchored(*lp.filtered, f"{s.names[0]} radar-inertial EKF")[0])
     sel = slice(None) if kept is None else kept
     out_cov, out_vcov = _anchor_covariance(out_cov[ci], pos_base[0], pos_base[sel],
                                            out_v, out_cov, out_vcov)
@@ -848,7 +884,7 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioR
                      a_rot.apply(out_v).reshape(-1, 3), out_b[:, 0], out_b[:, 1], out_b[:, 2],
                      out_b[:, 3], out_td[:, 0], out_td[:, 1], phi, s.names,
                      s.static[0][lp.k0:lp.k0 + n], lp.stats, am @ out_vcov @ am.T,
-                     masks if s.pts is not None else None, kept)
+                     masks if s.pts is not None else None, kept, filtered)
 
 
 def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
@@ -900,8 +936,13 @@ def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: C
     cfg = config or RioConfig()
     s = _setup(tracks, calib, (imu_timestamps, imu_data), radars, cfg, still, points)
     k0, t0, P0 = _initialise(s)
-    loop = _Loop(s, k0, t0, P0, keep)
-    loop.run()
+    smoother = RtsSmoother(s.ekf) if cfg.smooth else None
+    loop = _Loop(s, k0, t0, P0, keep, smoother)
+    try:
+        loop.run()
+    finally:
+        if smoother is not None:
+            smoother.close()
     return _result(s, loop, initial_pose)
 
 

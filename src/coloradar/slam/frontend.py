@@ -1,6 +1,7 @@
 """The front end of radar SLAM: the radar-inertial filter, seen through one small adapter.
 
-SLAM needs from odometry, per radar frame: the pose ``world_T_base``, its uncertainty, and
+SLAM needs from odometry, per radar frame: the pose ``world_T_base`` (smoothed, and the
+filter's own for comparison), its uncertainty, and
 whether the frame had an ego-velocity (its static points are then known by Doppler). This
 module is the only place that reads :class:`coloradar.odometry.rio.RioResult`
 (:func:`frontend_from_rio`), so a change of the filter's output changes this file only.
@@ -62,7 +63,10 @@ class FrontEnd:
     Attributes
     ----------
     trajectory
-        ``world_T_base`` at the frames (IMU-clock times, :attr:`trajectory.timestamps`).
+        ``world_T_base`` at the frames (IMU-clock times, :attr:`trajectory.timestamps`): the
+        filter's poses smoothed when its settings say so (``RioConfig.smooth``, which SLAM
+        turns on: :attr:`~coloradar.slam.SlamSettings.smooth_frontend`), what the odometry
+        factors are made of.
     frames
         int64 ``(M,)``: each pose's frame in the input clouds (the filter starts at the first
         usable frame, so the first input frames may have no pose).
@@ -76,6 +80,9 @@ class FrontEnd:
         (rotation vector) [rad²] at the keyframes.
     summary
         A few figures of the filter for ``slam.json``.
+    filtered
+        The filter's own (causal) poses, as ``coloradar odometry`` gives them; None when
+        ``trajectory`` is not smoothed (it is then the filter's).
     """
 
     trajectory: Trajectory
@@ -84,6 +91,7 @@ class FrontEnd:
     keyframes: np.ndarray
     covariance: np.ndarray
     summary: dict
+    filtered: Trajectory | None = None
 
 
 class KeyframeRule(Protocol):
@@ -141,7 +149,8 @@ def frontend_from_rio(res: RioResult, track: EgoVelocityTrack, keyframes: Sequen
         if kfs.size and not np.array_equal(res.kept[rows], kfs):
             raise ValueError("the filter's result lacks the covariance of some keyframes")
     return FrontEnd(res.trajectory, frames, track.ok[frames], kfs,
-                    np.array(res.covariance[rows], dtype=np.float64).reshape(-1, 6, 6), summary)
+                    np.array(res.covariance[rows], dtype=np.float64).reshape(-1, 6, 6), summary,
+                    res.filtered)
 
 
 def radar_inertial_frontend(track: EgoVelocityTrack, still: np.ndarray, calib: Calibration,

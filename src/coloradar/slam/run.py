@@ -3,9 +3,11 @@
 The output folder holds
 
 - ``trajectory.txt``: TUM, ``world_T_base`` at every radar frame, optimised;
-- ``odometry.txt``: TUM, the front end's trajectory (before optimisation), for comparison;
-- ``keyframes.csv``: per keyframe its frame, time, optimised and odometry positions and pose,
-  and submap size;
+- ``odometry.txt``: TUM, the radar-inertial filter's trajectory, as ``coloradar odometry``
+  gives it (causal), for comparison;
+- ``keyframes.csv``: per keyframe its frame, time, optimised pose, the front end's position
+  before optimisation (``odometry_*``: the filter's, smoothed when ``smooth_frontend``), and
+  submap size;
 - ``loops.csv``: every verified loop candidate: the pair, descriptor distance, gate, fitness,
   overlap, RMSE, the odometry test, accepted or not and why;
 - ``map.ply``: the radar map from the optimised poses, filtered (a voxel kept only when

@@ -3,7 +3,8 @@
 1. Ego-velocity of every frame; the cloud and which of its points are static go to a
    :class:`.stores.FrameStore` (on disk).
 2. The radar-inertial filter (:mod:`.frontend`), as ``coloradar odometry`` runs it (every
-   point updates it, read back from the store): a pose and covariance at every frame.
+   point updates it, read back from the store): a pose and covariance at every frame; the
+   poses smoothed with the later frames (``smooth_frontend``, :mod:`coloradar.odometry.smoother`).
 3. Keyframes and their submaps (:mod:`.submaps`).
 4. The odometry's scale, from registrations of keyframes whose submaps share no frame
    (:mod:`.scale`), and the submaps built again at it (:func:`_scale`); odometry factors
@@ -23,7 +24,7 @@ from __future__ import annotations
 import time
 import tracemalloc
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -66,13 +67,16 @@ class SlamResult:
     Attributes
     ----------
     odometry
-        The front end's ``world_T_base`` at every radar frame.
+        The radar-inertial filter's ``world_T_base`` at every radar frame, as ``coloradar
+        odometry`` gives it (causal: not smoothed; the front end's smoothed poses are
+        :attr:`FrontEnd.trajectory <.frontend.FrontEnd.trajectory>`).
     trajectory
         The optimised ``world_T_base`` at the same times.
     keyframes
         int64 ``(K,)``: the keyframes' frame indices.
     keyframe_odometry, keyframe_poses
-        ``world_T_base`` of the keyframes before and after optimisation (``K`` poses; index
+        ``world_T_base`` of the keyframes before optimisation (the front end's, smoothed when
+        ``smooth_frontend``) and after (``K`` poses; index
         ``n`` gives keyframe ``n``'s :class:`~coloradar.geometry.SE3`); None without keyframes.
     loops
         Every verified candidate (accepted or not).
@@ -310,7 +314,8 @@ def _frontend(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib: Calib
               tm: dict[str, float]) -> FrontEnd:
     """Steps 1–2: the front end; each frame's cloud and static points go to ``store`` (on
     disk), and what the filter returns is reduced to a :class:`FrontEnd` at once."""
-    ego_config, rio_config = fs.ego_velocity, fs.filter or RioConfig()
+    ego_config = fs.ego_velocity
+    rio_config = replace(fs.filter or RioConfig(), smooth=s.smooth_frontend)
     thr = s.static_threshold if s.static_threshold is not None else ego_config.threshold
     t0 = time.perf_counter()
 
@@ -426,10 +431,11 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
     try:
         fe = _frontend(clouds, timestamps, calib, (imu_timestamps, imu_data), radar, fs, s,
                        groundtruth, store, tm)
-        odo, kfs = fe.trajectory, fe.keyframes
+        odo = fe.filtered if fe.filtered is not None else fe.trajectory
+        kfs = fe.keyframes
         if kfs.size == 0:
-            return SlamResult(odo, odo, kfs, None, None, [], np.zeros((0, 5), np.float32),
-                              fe, np.zeros(0, np.int64), tm)
+            return SlamResult(odo, fe.trajectory, kfs, None, None, [],
+                              np.zeros((0, 5), np.float32), fe, np.zeros(0, np.int64), tm)
         submaps = _submaps(fe, store, calib, radar, s)
         _lap("submaps", t0, tm)
         scale, submaps = _scale(fe, store, submaps, calib, radar, s)
@@ -443,8 +449,8 @@ def slam_from_clouds(clouds: Iterable[np.ndarray], timestamps: np.ndarray, calib
         out = correct_frames(fe.trajectory, kfs, fe.trajectory[kfs], after)
         m = build_slam_map(submaps, after, s.map_voxel, s.map_min_keyframes)
         _lap("map", t0, tm)
-        return SlamResult(odo, out, kfs, odo[kfs], after, records, m, fe, submaps.sizes(), tm,
-                          scale, counts)
+        return SlamResult(odo, out, kfs, fe.trajectory[kfs], after, records, m, fe,
+                          submaps.sizes(), tm, scale, counts)
     finally:
         store.close()
         if submaps is not None:
