@@ -587,7 +587,8 @@ class _Loop:
         self.out = PoseOutputs(len(s.tracks[0]) - k0, n_r, keep, s.cfg.anchor_delay)
         self.smoother = smoother
         self.filtered: tuple[np.ndarray, np.ndarray] | None = None   # (p, R) when smoothed
-        self.at = np.zeros(len(s.tracks[0]) - k0, dtype=np.int64)    # poses' smoother states
+        # Each output pose's state in the smoother's record (RtsSmoother.pose_at).
+        self.at = np.zeros(len(s.tracks[0]) - k0 if smoother else 0, dtype=np.int64)
         self.imu_R_base = s.imu_T_base.rotation.as_matrix()   # for the base pose keep is shown
         self.stats = {n: {"updates": 0, "rejected": 0, "zupts": 0, "failed": 0, "resets": 0,
                           "point_updates": 0, "points": 0, "points_used": 0} for n in s.names}
@@ -869,7 +870,7 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioR
                 pos_base, a_rot)
 
     traj, pos_base, a_rot = anchored(out_p, out_R, f"{s.names[0]} radar-inertial "
-                                     + ("EKF, smoothed" if lp.filtered else "EKF"))
+                                     + ("EKF, smoothed" if lp.filtered is not None else "EKF"))
     filtered = (None if lp.filtered is None else
                 anchored(*lp.filtered, f"{s.names[0]} radar-inertial EKF")[0])
     sel = slice(None) if kept is None else kept
