@@ -128,7 +128,7 @@ def _rpe(positions: np.ndarray, rotations: Rotation, truth_p: np.ndarray,
 
 
 @pytest.mark.parametrize("seed", [11, 12, 13])
-def test_smoothed_poses_are_closer_to_the_truth(seed):
+def test_smoothed_motion_is_closer_to_the_truth(seed):
     """A 30 s handheld run (simulated IMU, noisy radar ego-velocities): the smoothed relative
     motion over 1 s and 3 s is better than the filter's."""
     imu_t, data, track, traj, *_ = _synthetic(30.0, seed, profile="handheld", speed=1.0,
@@ -159,3 +159,22 @@ def test_two_radars_with_their_own_clocks_are_smoothed_too():
     e_f = _rpe(filt.trajectory.translations, filt.trajectory.rotations, tp, tr, 10)
     e_s = _rpe(smooth.trajectory.translations, smooth.trajectory.rotations, tp, tr, 10)
     assert e_s < 0.85 * e_f, (e_s, e_f)
+
+
+def test_the_smoothers_record_leaves_nothing_behind(tmp_path, monkeypatch):
+    """The record is a scratch file in the temporary folder, unlinked from the start: during
+    and after a smoothed run the folder holds no file."""
+    import tempfile
+
+    from coloradar.formats.atomic import scratch_file
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with scratch_file("probe_") as f:
+        f.write(b"x" * 100)
+        f.seek(0)
+        assert f.read() == b"x" * 100
+        assert list(tmp_path.iterdir()) == []
+    imu_t, data, track, *_ = _synthetic(6.0, 3, profile="handheld", speed=1.0)
+    res = rio_odometry(track, PRESET, imu_t, data, config=RioConfig(smooth=True))
+    assert res.filtered is not None and len(res.trajectory) > 40
+    assert list(tmp_path.iterdir()) == []

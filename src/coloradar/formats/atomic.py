@@ -1,20 +1,23 @@
-"""Atomic file writing: a reader never sees a half-written file, a killed writer leaves none."""
+"""Atomic file writing: a reader never sees a half-written file, a killed writer leaves none;
+and scratch files (:func:`scratch_file`) that leave nothing behind at all."""
 
 from __future__ import annotations
 
 import os
 import re
 import secrets
+import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import BinaryIO
 
 from ..errors import ColoradarError, OutputExistsError, WriteError
 
 __all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_text", "clean_partial_files",
            "default_file_mode",
            "is_partial_file", "make_output_dir", "new_output_path", "output_dir_error",
-           "write_text_if_changed"]
+           "scratch_file", "write_text_if_changed"]
 
 # atomic_write_bytes's temporary names: ".<final name>.<random>.tmp"
 _PARTIAL_RE = re.compile(r"^\..+\.tmp(\.\w+)?$")
@@ -178,3 +181,12 @@ def clean_partial_files(folders: Iterable[Path], name: str | None = None) -> int
                 except FileNotFoundError:
                     pass
     return n
+
+
+def scratch_file(prefix: str) -> BinaryIO:
+    """A temporary binary file (``w+b``) for data too large to keep in memory, unlinked at once:
+    nothing is left behind, whatever happens to the process; closing it frees the space."""
+    fd, name = tempfile.mkstemp(prefix=prefix, suffix=".bin")
+    f = os.fdopen(fd, "w+b")
+    os.unlink(name)
+    return f

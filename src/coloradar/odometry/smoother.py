@@ -34,13 +34,12 @@ the filter's (its covariances are therefore conservative for the smoothed poses)
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..formats.atomic import scratch_file
 from .eskf import BA, BG, TH, ErrorStateEKF, P, V, exp_so3
 
 __all__ = ["RtsSmoother", "rts_gain"]
@@ -113,9 +112,7 @@ class RtsSmoother:
         self._td = [ekf.td_index(r) for r in range(ekf.n_radars)]
         self._phi = [ekf.phi_slice(r) for r in range(ekf.n_radars)]
         self._record = self.n * self.n + 2 * self.layout.size    # float64 values per step
-        fd, name = tempfile.mkstemp(prefix="coloradar_rts_", suffix=".bin")
-        self._f = os.fdopen(fd, "w+b")
-        os.unlink(name)          # nothing is left behind, whatever happens to the process
+        self._f = scratch_file("coloradar_rts_")
         self.steps = 0
         self._before: tuple[np.ndarray, np.ndarray] | None = None
 

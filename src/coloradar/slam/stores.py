@@ -14,13 +14,12 @@ process, and the operating system's page cache, not the Python heap, holds what 
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Iterator, Sequence
 from typing import overload
 
 import numpy as np
 
+from ..formats.atomic import scratch_file
 from .submaps import Submap
 
 __all__ = ["Clouds", "FrameStore", "Growing", "SubmapStore"]
@@ -55,9 +54,7 @@ class Growing:
 
 class _TempFile:
     def __init__(self, prefix: str) -> None:
-        fd, name = tempfile.mkstemp(prefix=prefix, suffix=".bin")
-        self._f = os.fdopen(fd, "w+b")
-        os.unlink(name)  # nothing is left behind, whatever happens to the process
+        self._f = scratch_file(prefix)
         self._offsets = Growing(np.int64)
         self._offsets.append(0)
 
