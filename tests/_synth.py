@@ -161,3 +161,18 @@ def calibrated_hardware(calib):
     cap = cap * np.exp(-2j * np.pi * bins[:, :, None] * n / w.num_samples)
     phi = np.angle(np.sum(cap * np.conj(cap[0, 0])[None, None, :], axis=-1))
     return replace(pf, phase=pf.phase * np.exp(-1j * phi), frequency=pf.frequency - bins)
+
+
+def matched(calib):
+    """``calib`` (a RadarCalib) with a unit phase calibration where it has none: the boards that
+    tests synthesise from first principles have matched channels, and the chain searches Doppler
+    aliases only on an array it knows to be phase-calibrated (docs/dsp.md)."""
+    from dataclasses import replace
+
+    from coloradar.calib import identity_phase_calib
+
+    if calib.phase_frequency is not None:
+        return calib
+    w = calib.waveform
+    return replace(calib, phase_frequency=identity_phase_calib(w.num_tx, w.num_rx, w.slope,
+                                                               w.sample_rate))

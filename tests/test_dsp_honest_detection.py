@@ -20,7 +20,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from _synth import REFERENCE_CALIB
+from _synth import REFERENCE_CALIB, matched
 from coloradar.calib import load_calibration, preset_radar
 from coloradar.dsp import RadarProcessor
 from coloradar.sim import apply_channel_errors, make_channel_errors, synthesize_adc
@@ -34,11 +34,11 @@ def radar(name: str):
     if REFERENCE.is_dir():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")             # the real files' known defects
-            return load_calibration(REFERENCE).radar(name)
+            return matched(load_calibration(REFERENCE).radar(name))
     base = preset_radar(name)
     if name == "cascade":
         return replace(base, phase_frequency=make_channel_errors(base, np.random.default_rng(11)))
-    return base
+    return matched(base)
 
 
 def amplitude_for(calib, snr_db: float, sigma: float) -> float:

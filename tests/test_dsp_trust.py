@@ -22,7 +22,7 @@ import warnings
 import numpy as np
 import pytest
 
-from _synth import REFERENCE_CALIB, calibrated_hardware, exact_adc
+from _synth import REFERENCE_CALIB, calibrated_hardware, exact_adc, matched
 from coloradar.calib import load_calibration, preset_radar
 from coloradar.dsp import RadarProcessor
 from coloradar.sim import apply_channel_errors
@@ -36,8 +36,8 @@ def radars():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")             # the real files' known defects
             cal = load_calibration(REFERENCE_CALIB)
-        return {n: cal.radar(n) for n in ("cascade", "single_chip")}
-    return {n: preset_radar(n) for n in ("cascade", "single_chip")}
+        return {n: matched(cal.radar(n)) for n in ("cascade", "single_chip")}
+    return {n: matched(preset_radar(n)) for n in ("cascade", "single_chip")}
 
 
 def amplitude(calib, snr_db: float) -> float:

@@ -19,11 +19,20 @@ from .heatmap_grid import HeatmapConfig, format_heatmap_cfg, parse_heatmap_cfg, 
 from .phase_frequency import (
     PhaseFrequencyCalib,
     format_phase_frequency_calib,
+    identity_phase_calib,
     parse_phase_frequency_calib,
+    read_phase_frequency_calib,
+    write_phase_frequency_calib,
 )
 from .presets import PRESET_TRANSFORMS, preset_calibration, preset_radar
 from .rig import RADARS, SENSORS, Calibration, RadarCalib
-from .sensor import load_calibration, load_radar_calib, with_coupling, write_calibration
+from .sensor import (
+    load_calibration,
+    load_radar_calib,
+    with_coupling,
+    with_phase_calibration,
+    write_calibration,
+)
 from .transforms import Extrinsic, format_transform, parse_transform
 from .waveform import SPEED_OF_LIGHT, WaveformConfig, format_waveform_cfg, parse_waveform_cfg
 
@@ -45,6 +54,7 @@ __all__ = [
     "format_coupling_calib",
     "format_heatmap_cfg",
     "format_phase_frequency_calib",
+    "identity_phase_calib",
     "format_transform",
     "format_waveform_cfg",
     "load_calibration",
@@ -53,6 +63,7 @@ __all__ = [
     "parse_coupling_calib",
     "parse_heatmap_cfg",
     "parse_phase_frequency_calib",
+    "read_phase_frequency_calib",
     "parse_transform",
     "parse_waveform_cfg",
     "preset_calibration",
@@ -60,6 +71,8 @@ __all__ = [
     "read_coupling_calib",
     "shipped_angle_bins",
     "with_coupling",
+    "with_phase_calibration",
     "write_calibration",
     "write_coupling_calib",
+    "write_phase_frequency_calib",
 ]

@@ -23,15 +23,20 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CalibrationError
+from ..formats.atomic import atomic_write_text, new_output_path
+from ..formats.source import read_file_text
 from ._parse import check_finite, readonly
 from .waveform import SPEED_OF_LIGHT
 
-__all__ = ["PhaseFrequencyCalib", "format_phase_frequency_calib", "parse_phase_frequency_calib"]
+__all__ = ["PhaseFrequencyCalib", "format_phase_frequency_calib", "identity_phase_calib",
+           "parse_phase_frequency_calib", "read_phase_frequency_calib",
+           "write_phase_frequency_calib"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,3 +152,31 @@ def format_phase_frequency_calib(c: PhaseFrequencyCalib) -> str:
     if not c.near_field:
         body["nearFieldPhases"] = False                 # coloradar's key (module docstring)
     return json.dumps({"antennaCalib": body}) + "\n"
+
+
+def read_phase_frequency_calib(path: str | os.PathLike[str]) -> PhaseFrequencyCalib:
+    """Read a ``phase_frequency_calib.txt`` (the release's, or one written by
+    ``coloradar calibrate phase``); errors name the file."""
+    return parse_phase_frequency_calib(read_file_text(path), str(path))
+
+
+def write_phase_frequency_calib(path: str | os.PathLike[str], c: PhaseFrequencyCalib,
+                                overwrite: bool = False) -> None:
+    """Write ``c`` as a ``phase_frequency_calib.txt``, atomically (whole or not at all).
+
+    Raises
+    ------
+    OutputExistsError
+        ``path`` exists and ``overwrite`` is not set.
+    """
+    atomic_write_text(new_output_path(path, overwrite), format_phase_frequency_calib(c))
+
+
+def identity_phase_calib(num_tx: int, num_rx: int, slope: float,
+                         sample_rate: float) -> PhaseFrequencyCalib:
+    """The calibration of a board whose channels are matched (unit phases, equal delays, no
+    near-field phases): what a simulated board without planted errors is, and what tells the
+    chain that its channel phases can be trusted (the Doppler alias search, docs/dsp.md)."""
+    return PhaseFrequencyCalib(np.zeros((num_tx, num_rx)),
+                               np.ones((num_tx, num_rx), dtype=np.complex128), slope,
+                               sample_rate, near_field=False)

@@ -21,8 +21,10 @@ from .antenna import format_antenna_cfg, parse_antenna_cfg
 from .coupling import CouplingCalib, format_coupling_calib, parse_coupling_calib, read_coupling_calib
 from .heatmap_grid import format_heatmap_cfg, parse_heatmap_cfg
 from .phase_frequency import (
+    PhaseFrequencyCalib,
     format_phase_frequency_calib,
     parse_phase_frequency_calib,
+    read_phase_frequency_calib,
 )
 from .rig import RADARS, SENSORS, Calibration, RadarCalib
 from .transforms import format_transform, parse_transform
@@ -36,6 +38,7 @@ __all__ = [
     "load_calibration",
     "load_radar_calib",
     "with_coupling",
+    "with_phase_calibration",
     "write_calibration",
 ]
 
@@ -195,16 +198,51 @@ def with_coupling(calib: Calibration, coupling: CouplingCalib | str | os.PathLik
     """
     c = coupling if isinstance(coupling, CouplingCalib) else read_coupling_calib(coupling)
     where = "the coupling calibration" if isinstance(coupling, CouplingCalib) else str(coupling)
+    name = _radar_of_size(calib, c.num_tx, c.num_rx, radar, where, "coupling")
+    radars = {r: calib.radar(r) for r in RADARS}
+    radars[name] = replace(radars[name], coupling=c)    # RadarCalib checks its range bins
+    return replace(calib, cascade=radars["cascade"], single_chip=radars["single_chip"])
+
+
+def with_phase_calibration(calib: Calibration,
+                           phase: PhaseFrequencyCalib | str | os.PathLike[str],
+                           radar: str | None = None) -> Calibration:
+    """``calib`` with one radar's phase/frequency calibration replaced (by one measured with
+    ``coloradar calibrate phase``, say).
+
+    Parameters
+    ----------
+    calib
+        The rig calibration.
+    phase
+        A :class:`PhaseFrequencyCalib` or the path of a ``phase_frequency_calib.txt``.
+    radar
+        ``"cascade"`` or ``"single_chip"``; None: the radar whose ``(tx, rx)`` the file has.
+
+    Raises
+    ------
+    CalibrationError
+        The file fits neither radar, or not the one named.
+    """
+    c = phase if isinstance(phase, PhaseFrequencyCalib) else read_phase_frequency_calib(phase)
+    where = "the phase calibration" if isinstance(phase, PhaseFrequencyCalib) else str(phase)
+    name = _radar_of_size(calib, c.num_tx, c.num_rx, radar, where, "phase")
+    radars = {r: calib.radar(r) for r in RADARS}
+    radars[name] = replace(radars[name], phase_frequency=c)
+    return replace(calib, cascade=radars["cascade"], single_chip=radars["single_chip"])
+
+
+def _radar_of_size(calib: Calibration, ntx: int, nrx: int, radar: str | None, where: str,
+                   what: str) -> str:
+    """The radar (``radar``, or the first whose size fits) of a ``ntx × nrx`` calibration
+    file, or a :class:`CalibrationError` that names ``where``."""
     fits = [r for r in RADARS
-            if (c.num_tx, c.num_rx) == (calib.radar(r).waveform.num_tx,
-                                        calib.radar(r).waveform.num_rx)]
+            if (ntx, nrx) == (calib.radar(r).waveform.num_tx, calib.radar(r).waveform.num_rx)]
     name = radar if radar is not None else (fits[0] if fits else None)
     if name is None or name not in fits:
         sizes = ", ".join(f"{r} {calib.radar(r).waveform.num_tx} x "
                           f"{calib.radar(r).waveform.num_rx}" for r in RADARS)
-        raise CalibrationError(f"{where}: a {c.num_tx} TX x {c.num_rx} RX coupling calibration "
+        raise CalibrationError(f"{where}: a {ntx} TX x {nrx} RX {what} calibration "
                                f"does not fit {'the ' + radar if radar else 'either'} radar "
                                f"({sizes})")
-    radars = {r: calib.radar(r) for r in RADARS}
-    radars[name] = replace(radars[name], coupling=c)    # RadarCalib checks its range bins
-    return replace(calib, cascade=radars["cascade"], single_chip=radars["single_chip"])
+    return name

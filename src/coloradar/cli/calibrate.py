@@ -1,5 +1,6 @@
 """``coloradar calibrate coupling RUN --out FILE``: a radar's antenna coupling estimated from a
-run's own ADC frames, written as a ``coupling_calib.txt`` (docs/calibration.md)."""
+run's own ADC frames, written as a ``coupling_calib.txt`` (docs/calibration.md); ``calibrate
+phase`` is in :mod:`.calibrate_phase`."""
 
 from __future__ import annotations
 
@@ -9,7 +10,13 @@ import warnings
 
 import numpy as np
 
-from ..calib import Calibration, load_calibration, with_coupling, write_coupling_calib
+from ..calib import (
+    Calibration,
+    load_calibration,
+    with_coupling,
+    with_phase_calibration,
+    write_coupling_calib,
+)
 from ..dataset import open_dataset, open_sequence
 from ..errors import DataWarning, MissingDataError
 from ..formats.source import check_input_path
@@ -59,6 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_file_output_args(c)
     add_quiet_arg(c)
     c.set_defaults(func=run)
+    from .calibrate_phase import register_phase
+    register_phase(what)
 
 
 def moving_frames(seq, radar: str, times: np.ndarray, min_speed: float) -> np.ndarray:
@@ -145,12 +154,13 @@ def summary(data: np.ndarray, standard_error: np.ndarray, released) -> list[str]
 
 
 def coupling_calibration(path: str | os.PathLike[str], calib: str | None,
-                         coupling: str | os.PathLike[str], radar: str | None = None
-                         ) -> Calibration:
-    """``coloradar process --coupling FILE``: the calibration of ``path`` (a run or a dataset
-    root; ``calib`` overrides it) with the radar of the file's size taking its coupling;
-    ``radar`` (the one radar processed, None for both) must be that radar, else a
-    ``CalibrationError`` (a file the processed radar would silently not use)."""
+                         coupling: str | os.PathLike[str] | None, radar: str | None = None,
+                         phase: str | os.PathLike[str] | None = None) -> Calibration:
+    """``coloradar process --coupling FILE --phase-calib FILE``: the calibration of ``path`` (a
+    run or a dataset root; ``calib`` overrides it) with the radar of each file's size taking
+    its coupling or phase calibration; ``radar`` (the one radar processed, None for both) must
+    be that radar, else a ``CalibrationError`` (a file the processed radar would silently not
+    use)."""
     if calib is not None:
         base = load_calibration(calib)
     else:
@@ -158,4 +168,8 @@ def coupling_calibration(path: str | os.PathLike[str], calib: str | None,
             base = open_sequence(path).calib
         except MissingDataError:
             base = open_dataset(path).calib
-    return with_coupling(base, coupling, radar)
+    if coupling is not None:
+        base = with_coupling(base, coupling, radar)
+    if phase is not None:
+        base = with_phase_calibration(base, phase, radar)
+    return base

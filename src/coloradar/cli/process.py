@@ -74,6 +74,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--coupling", metavar="FILE",
                    help="a coupling_calib.txt to subtract instead of the calibration's, for the "
                         "radar of its size (as 'coloradar calibrate coupling' writes it)")
+    p.add_argument("--phase-calib", metavar="FILE",
+                   help="a phase_frequency_calib.txt to calibrate the channels with instead of "
+                        "the calibration's, for the radar of its size (as 'coloradar calibrate "
+                        "phase' writes it); on a radar without one the Doppler alias search "
+                        "keeps folded range rates")
     p.add_argument("--radar", choices=("cascade", "single_chip", "all"), default="all",
                    help="radar to process (default: every radar with ADC frames)")
     p.add_argument("--products", type=_products, default=PRODUCTS,
@@ -106,8 +111,9 @@ def run(args: argparse.Namespace) -> int:
     check_output_outside_dataset(args.out, (args.path, args.calib))
     try:
         one = None if args.radar == "all" else args.radar
-        calib = (coupling_calibration(args.path, args.calib, args.coupling, one)
-                 if args.coupling else args.calib)
+        calib = (coupling_calibration(args.path, args.calib, args.coupling, one,
+                                      args.phase_calib)
+                 if args.coupling or args.phase_calib else args.calib)
         report = process(args.path, args.out, runs=args.runs, calib=calib,
                          radars=args.radar, products=args.products, frames=args.frames,
                          overwrite=args.overwrite, settings=settings, executor=executor,

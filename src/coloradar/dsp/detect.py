@@ -52,6 +52,11 @@ class Detections:
     alias
         int64 or None: the Doppler alias ``m`` chosen per detection (range rate =
         folded rate + ``2m·v_max``); None when no search ran.
+    alias_confidence
+        float64 or None: the probability of that alias under the array model (docs/dsp.md,
+        "Doppler beyond ±v_max"); on an array without a phase calibration, where the folded
+        rate is kept, a low value flags a point whose rate may be aliased. None when no
+        search ran.
     """
 
 
@@ -66,6 +71,7 @@ class Detections:
     power: np.ndarray
     snr: np.ndarray
     alias: np.ndarray | None = None
+    alias_confidence: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.range_bin.size)

@@ -20,11 +20,15 @@ from .windows import WINDOWS, WindowName
 __all__ = ["ANGLE_METHODS", "CFAR_LOOKS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AliasSettings",
            "AngleMethod", "AngleSettings", "ArraySettings", "CFARLooks", "CFARSettings",
            "CouplingDomain", "CubeSettings", "GuardSettings", "NoiseWeighting", "PointSettings",
-           "ProcessingSettings"]
+           "ProcessingSettings", "UNCALIBRATED_ALIAS", "UncalibratedAlias"]
 
 CouplingDomain = Literal["raw", "calibrated"]
 """What the coupling file is the range FFT of: uncalibrated or calibrated samples."""
 COUPLING_DOMAINS: tuple[CouplingDomain, ...] = get_args(CouplingDomain)
+UncalibratedAlias = Literal["fold", "search"]
+"""What the Doppler alias choice does on an array without a phase calibration: keep the folded
+rate (``"fold"``) or search as on a calibrated array (``"search"``)."""
+UNCALIBRATED_ALIAS: tuple[UncalibratedAlias, ...] = get_args(UncalibratedAlias)
 AngleMethod = Literal["fft", "capon"]
 """Detection angles by Bartlett (FFT) or Capon (MVDR) beamforming."""
 ANGLE_METHODS: tuple[AngleMethod, ...] = get_args(AngleMethod)
@@ -242,10 +246,26 @@ class AliasSettings:
         by a model selection on the filled row (one or two sources under each hypothesis,
         :meth:`~coloradar.dsp.detection.alias.AliasStage.choose`); another hypothesis must explain this margin
         [dB] more power than the folded one.
+    alias_min_confidence
+        A hypothesis other than the folded one is taken only where its probability
+        (:meth:`~coloradar.dsp.detection.alias.AliasStage.confidence`, which treats what no
+        model explains as noise) reaches this; elsewhere the folded rate is kept.
+    uncalibrated_alias
+        What the choice does when the radar's calibration has no phase calibration (or
+        ``phase_frequency_calibration`` is off). An alias hypothesis is a phase per TX slot,
+        and so is an uncalibrated board's TX phase error: on such an array no test of the
+        hypotheses can tell the two apart. ``"fold"`` (default) keeps every detection's
+        folded range rate and reports, as its alias confidence, how likely the folded
+        hypothesis is under the nominal (uncalibrated) phases, so that a low value flags a
+        point that could be aliased; ``"search"`` trusts the nominal phases (a board known to
+        be matched, or a simulated one). ``coloradar calibrate phase`` measures the
+        calibration from a run's own data (docs/dsp.md, "Doppler beyond ±v_max").
     """
 
     doppler_unwrap: float = 10.0
     alias_margin_db: float = 0.0
+    alias_min_confidence: float = 0.9
+    uncalibrated_alias: UncalibratedAlias = "fold"
 
 
 @dataclass(frozen=True)
@@ -333,6 +353,8 @@ class ProcessingSettings:
     cfar_range_floor: bool = True
     doppler_unwrap: float = 10.0
     alias_margin_db: float = 0.0
+    alias_min_confidence: float = 0.9
+    uncalibrated_alias: UncalibratedAlias = "fold"
     heatmap_unwrap: bool = False
     sidelobe_guard: bool = True
     sidelobe_margin_db: float = 6.0
@@ -355,6 +377,7 @@ class ProcessingSettings:
                    "coupling_domain": COUPLING_DOMAINS, "overlap": OVERLAP_MODES,
                    "cfar_kind": CFAR_KINDS, "angle_method": ANGLE_METHODS,
                    "noise_weighting": NOISE_WEIGHTINGS, "cfar_looks": CFAR_LOOKS,
+                   "uncalibrated_alias": UNCALIBRATED_ALIAS,
                    "azimuth_sign": (1, -1), "elevation_sign": (1, -1), "engine": ENGINES}
         choices["near_field"] = (True, False, "auto")
         for name, allowed in choices.items():
@@ -366,6 +389,9 @@ class ProcessingSettings:
         if not self.doppler_unwrap >= 0:
             raise SettingsError(f"doppler_unwrap must be >= 0 m/s (0 = off), got "
                                 f"{self.doppler_unwrap!r}")
+        if not 0.0 <= self.alias_min_confidence <= 1.0:
+            raise SettingsError(f"alias_min_confidence must lie in [0, 1], got "
+                                f"{self.alias_min_confidence!r}")
         if not 0.0 < self.angle_pfa < 1.0:
             raise SettingsError(f"angle_pfa must lie in (0, 1), got {self.angle_pfa!r}")
         if self.angle_oversample < 1 or self.capon_loading <= 0:

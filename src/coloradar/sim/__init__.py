@@ -18,6 +18,7 @@ from .lidar import LidarModel, column_times, simulate_scan
 from .paths import EllipsePath, LinePath, Sinusoids, path_from_dict
 from .radar import (
     RADAR_MODELS,
+    PhaseErrors,
     RadarModel,
     RadarTargets,
     make_channel_errors,
@@ -60,6 +61,7 @@ __all__ = [
     "LidarModel",
     "LinePath",
     "MovingObject",
+    "PhaseErrors",
     "RadarModel",
     "RadarTargets",
     "Rect",

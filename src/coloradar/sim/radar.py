@@ -38,6 +38,7 @@ from .scene import Scatterers
 
 __all__ = [
     "RADAR_MODELS",
+    "PhaseErrors",
     "RadarModel",
     "RadarTargets",
     "make_channel_errors",
@@ -230,6 +231,49 @@ def make_channel_errors(calib: RadarCalib, rng: np.random.Generator,
     amp = 1.0e4 * np.exp(log_amp - log_amp.mean())
     return PhaseFrequencyCalib(np.round(freq, 4), amp * phase, w.slope, w.sample_rate,
                                near_field=False)
+
+
+@dataclass(frozen=True)
+class PhaseErrors:
+    """Per-TX and per-RX phase and gain errors planted on one simulated radar board (an
+    uncalibrated board, as the release's single chip and a user's own board are).
+
+    Attributes
+    ----------
+    radar
+        ``"single_chip"`` or ``"cascade"``.
+    tx_phase_deg, rx_phase_deg
+        Each TX slot's / RX channel's phase error [deg]: a tuple with one value each, or a
+        spread ``s`` from which each is drawn uniformly in ``[−s, s]`` (``board_seed``). TX
+        slot 0 and RX 0 are the reference (their errors are relative).
+    gain_db
+        Spread [dB] of the TX and RX gains, each drawn uniformly in ``[−g, g]``.
+    calibrated
+        Whether the calib folder gets the calibration that removes the errors (False: the
+        radar's calib has no ``phase_frequency_calib.txt``, as an uncalibrated board).
+    """
+
+    radar: str = "single_chip"
+    tx_phase_deg: tuple[float, ...] | float = 180.0
+    rx_phase_deg: tuple[float, ...] | float = 0.0
+    gain_db: float = 0.0
+    calibrated: bool = False
+
+    def gains(self, num_tx: int, num_rx: int, rng: np.random.Generator) -> np.ndarray:
+        """complex128 ``(tx, rx)``: ``x = g · ideal`` per channel, ``g[0, 0] = 1``."""
+        def draw(v: tuple[float, ...] | float, n: int, what: str) -> np.ndarray:
+            if isinstance(v, (int, float)):
+                return rng.uniform(-float(v), float(v), n)
+            a = np.asarray(v, dtype=np.float64)
+            if a.shape != (n,):
+                raise ValueError(f"{what}: expected {n} values, got {a.size}")
+            return a
+        tx = np.radians(draw(self.tx_phase_deg, num_tx, "tx_phase_deg"))
+        rx = np.radians(draw(self.rx_phase_deg, num_rx, "rx_phase_deg"))
+        amp = 10.0 ** (rng.uniform(-self.gain_db, self.gain_db, (num_tx, 1)) / 20.0
+                       + rng.uniform(-self.gain_db, self.gain_db, (1, num_rx)) / 20.0)
+        g = amp * np.exp(1j * (tx[:, None] + rx[None, :]))
+        return g / g[0, 0]
 
 
 def tx_gains(errors: PhaseFrequencyCalib) -> np.ndarray:

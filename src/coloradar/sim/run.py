@@ -56,7 +56,9 @@ from ..calib import (
     format_heatmap_cfg,
     format_phase_frequency_calib,
     format_transform,
+    PhaseFrequencyCalib,
     format_waveform_cfg,
+    identity_phase_calib,
     preset_radar,
     with_coupling,
     write_calibration,
@@ -80,6 +82,7 @@ from .imu import GX5_25, ImuModel, simulate_imu
 from .lidar import LidarModel, simulate_scan
 from .radar import (
     RADAR_MODELS,
+    PhaseErrors,
     make_channel_errors,
     make_coupling,
     onboard_pointcloud,
@@ -187,7 +190,9 @@ def simulated_calibration(board_seed: int = 2021, true_angles: bool = True
 
     Both radars get the preset waveform and antenna layout, the real rig's extrinsics, and a
     coupling calibration; the cascade also a phase/frequency calibration
-    (:func:`.radar.make_channel_errors`). With ``true_angles`` and ``coloradar.dsp``
+    (:func:`.radar.make_channel_errors`), the single chip a unit one (its simulated channels
+    are matched, and the calibration says so: the chain trusts only a calibrated array's
+    phases to tell Doppler aliases apart). With ``true_angles`` and ``coloradar.dsp``
     available, the heatmap grids are the processor's true-angle grids (else the presets'
     shipped labelling).
 
@@ -202,7 +207,9 @@ def simulated_calibration(board_seed: int = 2021, true_angles: bool = True
     for name in RADARS:
         base = preset_radar(name)
         adc, coupling = make_coupling(base, RADAR_MODELS[name], rng)
-        pf = make_channel_errors(base, rng) if name == "cascade" else None
+        w = base.waveform
+        pf = (make_channel_errors(base, rng) if name == "cascade"
+              else identity_phase_calib(w.num_tx, w.num_rx, w.slope, w.sample_rate))
         rc = replace(base, coupling=coupling, phase_frequency=pf, source="simulated")
         if true_angles:
             proc = heatmap_processor(rc)
@@ -228,6 +235,35 @@ def _with_coupling_calib(calib: Calibration, coupling_adc: dict[str, np.ndarray]
         if c is not calib.radar(name).coupling and c is not None:
             adc[name] = planted_coupling(new.radar(name), c, coupling_adc[name])
     return new, adc
+
+
+def _with_phase_errors(calib: Calibration, planted: PhaseErrors | None, board_seed: int
+                      ) -> tuple[Calibration, dict[str, PhaseFrequencyCalib | None]]:
+    """``SimulationSpec.phase_errors``: the calibration to write and each radar's hardware
+    errors (what its frames carry: the cascade's calibrated channel errors; the single chip's
+    none), with the planted errors on top. An uncalibrated radar's calib loses its phase
+    calibration; a calibrated one gets the errors' own."""
+    hardware: dict[str, PhaseFrequencyCalib | None] = {
+        "cascade": calib.cascade.phase_frequency, "single_chip": None}
+    if planted is None:
+        return calib, hardware
+    if planted.radar not in RADARS:
+        raise ColoradarError(f"phase_errors.radar must be one of {', '.join(RADARS)}, got "
+                             f"{planted.radar!r}")
+    rc = calib.radar(planted.radar)
+    w = rc.waveform
+    try:
+        g = planted.gains(w.num_tx, w.num_rx, np.random.default_rng([board_seed, 7]))
+    except ValueError as exc:
+        raise ColoradarError(f"phase_errors ({planted.radar}): {exc}") from None
+    base = rc.phase_frequency or identity_phase_calib(w.num_tx, w.num_rx, w.slope,
+                                                      w.sample_rate)
+    hw = PhaseFrequencyCalib(base.frequency, base.phase * g, base.slope, base.sample_rate,
+                             near_field=base.near_field)
+    hardware[planted.radar] = hw
+    new = replace(rc, phase_frequency=hw if planted.calibrated else None)
+    radars = {r: (new if r == planted.radar else calib.radar(r)) for r in RADARS}
+    return replace(calib, cascade=radars["cascade"], single_chip=radars["single_chip"]), hardware
 
 
 def _calib_texts(calib: Calibration, layout: RunLayout = COLORADAR) -> dict[str, str]:
@@ -326,6 +362,8 @@ class _Context:
         self.imu_model, self.radar_time_offset = imu_model, float(spec.radar_time_offset)
         self.coupling_adc, self.seed, self.start_time = coupling_adc, spec.seed, spec.start_time
         self.root, self.heatmaps, self.layout = root, heatmaps, layout
+        self.hardware: dict[str, PhaseFrequencyCalib | None] = {}
+        """Each radar's channel errors (what its frames carry; :func:`_with_phase_errors`)."""
         self._progress = progress
         self._lock = threading.Lock()
 
@@ -364,7 +402,7 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
         targets = visible_targets(calib, model, scat, r_ws, origin, v_world, w_s, rects)
         g = ctx.rng(radar, i)
         frame = radar_frame(calib, model, targets,
-                            channel_errors=calib.phase_frequency if radar == "cascade" else None,
+                            channel_errors=ctx.hardware.get(radar),
                             coupling_adc=ctx.coupling_adc[radar], rng=g)
         raw = encode_adc(frame)
         atomic_write_bytes(ctx.root / streams["adc"].frame_path(first + i), raw)
@@ -401,6 +439,9 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
            f"{radar}/velocity": vel, f"{radar}/angular_velocity": ang,
            f"{radar}/offsets": np.asarray(offsets, dtype=np.int64),
            f"{radar}/coupling": np.fft.fft(ctx.coupling_adc[radar], axis=-1).astype(np.complex64)}
+    hw = ctx.hardware.get(radar)
+    if hw is not None:                   # x = g·ideal per channel (P[t,r]/P[0,0])
+        out[f"{radar}/channel_gain"] = (1.0 / hw.relative_phase()).astype(np.complex128)
     for k, parts in acc.items():
         empty = np.zeros((0, 3) if k in ("position", "velocity") else 0,
                          dtype=np.int64 if k == "ident" else np.float32)
@@ -458,6 +499,7 @@ class SimulationSpec:
     rest: float = 0.0
     radar_time_offset: float = 0.0
     coupling_calib: str | os.PathLike[str] | CouplingCalib | None = None
+    phase_errors: PhaseErrors | None = None
 
 
 def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None, *,
@@ -528,6 +570,12 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
         the simulator's own leakage on a TX whose block is all zeros (the release's TX 2), so
         that they have coupling on every TX whatever the file lacks. The truth holds what the
         frames carry (``<radar>/coupling``).
+    phase_errors
+        :class:`~coloradar.sim.radar.PhaseErrors` planted on one radar's channels (per-TX
+        and per-RX phases and gains, on top of the cascade's own channel errors); unless
+        ``calibrated``, that radar's calib holds no phase calibration, as a real uncalibrated
+        board's. The truth holds each radar's channel gains ``<radar>/channel_gain``
+        (``x = g·ideal``, relative to channel (0, 0)).
 
     Returns
     -------
@@ -546,6 +594,7 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
     want_heatmaps = spec.heatmaps is not False and any(r in sensors for r in RADARS)
     calib, coupling_adc = _with_coupling_calib(*simulated_calibration(spec.board_seed),
                                                spec.coupling_calib)
+    calib, hardware = _with_phase_errors(calib, spec.phase_errors, spec.board_seed)
     has_proc = want_heatmaps and heatmap_processor(calib.cascade) is not None
     if spec.heatmaps and want_heatmaps and not has_proc:
         raise ColoradarError("heatmaps were asked for but coloradar.dsp (RadarProcessor."
@@ -559,6 +608,7 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
     traj = _trajectory(sc, spec.motion, spec.seed, spec.speed, spec.rest)
     ctx = _Context(sc, traj, calib, coupling_adc, spec, partial, progress, has_proc, lay,
                    imu_model)
+    ctx.hardware = hardware
     times, gt_times = _schedule(ctx, spec.duration)
     try:
         truth = _simulate_scans(ctx, sensors, times, workers)
@@ -569,6 +619,7 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
             speed=spec.speed, rest=float(spec.rest),
             radar_time_offset=float(spec.radar_time_offset),
             coupling_calib=_coupling_record(spec.coupling_calib),
+            phase_errors=asdict(spec.phase_errors) if spec.phase_errors else None,
             imu_model=asdict(imu_model), sensors=list(sensors),
             vicon=spec.vicon, heatmaps=has_proc, start_time=spec.start_time, name=name,
             board_seed=spec.board_seed, coloradar_version=__version__, counts=counts,

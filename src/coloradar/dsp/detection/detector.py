@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...calib import RadarCalib
@@ -51,7 +53,9 @@ class Detector:
         self.beams = Beams(calib, s.array, s.angle, s.phase_frequency_calibration, cube.engine)
         self.cfar = CFARStage(calib, cube, s.cfar, s.coupling_subtraction,
                               self.beams.grid.num_elements)
-        self.alias = AliasStage(calib, cube, self.beams, s.alias, s.overlap, s.angle_pfa)
+        calibrated = s.phase_frequency_calibration and calib.phase_frequency is not None
+        self.alias = AliasStage(calib, cube, self.beams, s.alias, s.overlap, s.angle_pfa,
+                                calibrated)
         self.peaks = PeakStage(calib, cube, self.beams, s.angle, s.overlap)
         self.resolve = ResolveStage(self.beams, s.angle)
         self.guard = GuardStage(calib, cube, self.beams, s.guard, s.overlap, s.peak_grouping)
@@ -77,7 +81,10 @@ class Detector:
         keep, nb = self.guard.keep(rd, rd_next, found, src, pk.floor[ci], explain)
         kept = Sources(src.d[keep], src.r[keep], palias[keep] if palias is not None else None,
                        uy[keep], uz[keep], peak[keep], steer[:, keep])
-        return self.points.place(kept, nb[keep], cells.d_ref[ci[keep]], found)
+        det = self.points.place(kept, nb[keep], cells.d_ref[ci[keep]], found)
+        if cells.alias_confidence is not None:
+            det = replace(det, alias_confidence=cells.alias_confidence[ci[keep]])
+        return det
 
     def cells(self, rd: np.ndarray, found: CFARCells) -> tuple[Cells, Explainers]:
         """The detected cells beyond ``min_range`` with their compensated vectors and aliases,
@@ -101,19 +108,19 @@ class Detector:
         # Beam noise per cell: the CFAR noise of the statistic, per channel, on the beam of the
         # unique elements (|aᴴn|²/M² has mean Σ_m σ_m²/M²).
         beam_noise = noise[d, r] * self.cfar.beam_noise_factor(found.sig2)
-        alias, _ = self.alias.choose(vecs, k_signed,
-                                     beam_noise * self.beams.grid.num_elements)
+        alias, conf = self.alias.choose(vecs, k_signed,
+                                        beam_noise * self.beams.grid.num_elements)
         if alias is not None:
             vecs = vecs * alias_phase(ntx, alias)[:, None, :]
         vectors = combine_channels(vecs, self.calib.antenna.virtual, self.overlap).T  # (K, M)
-        return Cells(d, r, d_ref, vectors, alias, beam_noise), explain
+        return Cells(d, r, d_ref, vectors, alias, beam_noise, conf), explain
 
     def cell_aliases(self, rd: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The CFAR cells of ``rd`` (TDM-compensated at the bin centres) whose best Doppler alias
         is not the folded one, as detections choose it at the bin centre: their Doppler bins,
         range bins and aliases; None where the search is off or no cell passes the CFAR."""
-        if self.alias.hypotheses.size < 2:
+        if self.alias.hypotheses.size < 2 or self.alias.fold:
             return None
         stat, _, looks, sig2 = self.cfar.statistic(rd)
         mask, noise = self.cfar.cfar_mask(stat, looks)

@@ -41,6 +41,9 @@ class Cells:
         int ``(K,)`` Doppler alias of each cell, or None (search off).
     beam_noise
         float64 ``(K,)`` mean noise power of the cell's beam (heatmap units).
+    alias_confidence
+        float64 ``(K,)`` confidence of each cell's alias (``AliasStage.confidence``), or None
+        (search off).
     """
 
     d: np.ndarray
@@ -49,6 +52,7 @@ class Cells:
     vectors: np.ndarray
     alias: np.ndarray | None
     beam_noise: np.ndarray
+    alias_confidence: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
