@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from _synth import matched
 from coloradar.calib import preset_radar
 from coloradar.dsp import ProcessingSettings, RadarProcessor
 from coloradar.sim import synthesize_adc
@@ -30,7 +31,7 @@ def corridor(rng: np.random.Generator, n: int = 400) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def frames():
-    cal = preset_radar("cascade")
+    cal = matched(preset_radar("cascade"))          # a perfect board: its phases are known
     rng = np.random.default_rng(1)
     out = []
     for f in range(8):
@@ -70,7 +71,7 @@ def test_beam_doppler_removes_the_vertical_bias_of_surface_detections(frames):
 
 def test_beam_doppler_keeps_isolated_targets_exact():
     """A single target: both refinements agree with the physical range rate."""
-    cal = preset_radar("cascade")
+    cal = matched(preset_radar("cascade"))          # a perfect board: its phases are known
     vbin = cal.waveform.velocity_bin_width
     for i, (az, el, vr) in enumerate([(25.0, 10.0, -2.5), (-40.0, -15.0, 1.2), (5.0, 0.0, 3.3)]):
         a, e = np.radians(az), np.radians(el)

@@ -204,7 +204,7 @@ def test_measured_calibration_resolves_fast_targets_again(boards, name, v_range)
     adc = seq.radar(name).adc
     vel = rig_velocity(trajectory_from_groundtruth(seq), adc.timestamps, calib=seq.calib,
                        sensor=name).linear
-    est = estimate_phase_calibration((adc[k] for k in range(len(adc))), rc, velocities=vel)
+    est = estimate_phase_calibration(adc, rc, velocities=vel)
     calibrated = with_phase_calibration(seq.calib, est.calibration, name).radar(name)
     proc = RadarProcessor(calibrated, coupling_subtraction=False, phase_centre=False)
     res = fast_trials(calibrated, hardware, proc, v_range, 30, seed=7)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Collection
 from dataclasses import replace
 from pathlib import Path
 
@@ -83,7 +84,8 @@ def _calib_source(path: str | os.PathLike[str]) -> Source:
 
 
 def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
-                     layout: str | RunLayout = "coloradar") -> Calibration:
+                     layout: str | RunLayout = "coloradar",
+                     sensors: Collection[str] | None = None) -> Calibration:
     """Load the rig calibration.
 
     Parameters
@@ -98,6 +100,10 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
         radars it calibrates (ColoRadar+ has only the cascade; the other radar takes its
         preset silently) and how its transform files are named (ColoRadar+'s
         ``base_to_radar.txt`` is the cascade's).
+    sensors
+        The sensors the data at hand has (a run's sensor folders), or None for all: a value
+        taken from the presets is warned about only for these (an imported single-chip capture
+        hears nothing of the cascade's or the lidar's extrinsics).
 
     Returns
     -------
@@ -118,7 +124,7 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
             except ColoradarError:
                 raise
         else:
-            if name in lay.calib_radars:
+            if name in lay.calib_radars and (sensors is None or name in sensors):
                 warnings.warn(f"{src.location}: no {name}/ calibration; using the built-in "
                               "preset", CalibrationWarning, stacklevel=2)
                 preset_values.append(f"{name} radar")
@@ -134,16 +140,19 @@ def load_calibration(path: str | os.PathLike[str] | Source | None = None, *,
                 transforms[sensor] = parse_transform(src.read_text(rel), src.describe(rel))
                 own.add(sensor)
         missing = [s for s in lay.transforms if s not in own]
-        if missing:
+        told = [s for s in missing if sensors is None or s in sensors]
+        if told:
             warnings.warn(f"{src.location}: no transforms/"
-                          f"{', '.join(lay.transforms[s] for s in missing)}; using the built-in "
-                          f"preset extrinsic{'s' if len(missing) > 1 else ''} of "
-                          f"{', '.join(missing)} (the real rig's, not this calibration's)",
+                          f"{', '.join(lay.transforms[s] for s in told)}; using the built-in "
+                          f"preset extrinsic{'s' if len(told) > 1 else ''} of "
+                          f"{', '.join(told)} (the real rig's, not this calibration's)",
                           CalibrationWarning, stacklevel=2)
     else:
         missing = list(lay.transforms)
-        warnings.warn(f"{src.location}: no transforms/ folder; using the built-in rig extrinsics "
-                      f"of {', '.join(missing)}", CalibrationWarning, stacklevel=2)
+        told = [s for s in missing if sensors is None or s in sensors]
+        if told:
+            warnings.warn(f"{src.location}: no transforms/ folder; using the built-in rig "
+                          f"extrinsics of {', '.join(told)}", CalibrationWarning, stacklevel=2)
     preset_values += [f"{s} extrinsic" for s in missing]
     return Calibration(radars["cascade"], radars["single_chip"], transforms, src.location,
                        tuple(preset_values))

@@ -71,8 +71,24 @@ def radar_velocities(seq, radar: str, times: np.ndarray) -> np.ndarray:
     return out
 
 
+class _Picked:
+    """Frames ``positions`` of an ADC stream, read when indexed (None: unreadable)."""
+
+    def __init__(self, stream, positions: list[int]) -> None:
+        self.stream, self.positions = stream, positions
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    def __getitem__(self, i: int) -> np.ndarray | None:
+        return self.stream.read_or_skip(self.positions[i])
+
+
 def run_phase(args: argparse.Namespace) -> int:
-    from ..dsp.phase_estimate import estimate_phase_calibration  # dsp is heavy: only when run
+    from ..dsp.phase_estimate import (  # dsp is heavy: only when run
+        estimate_phase_calibration,
+        estimation_passes,
+    )
 
     check_input_path(args.run, "a run folder or a run .zip")
     out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
@@ -93,19 +109,12 @@ def run_phase(args: argparse.Namespace) -> int:
                                "may alias (raise --max-speed to use them anyway)")
     pick = np.linspace(0, slow.size - 1, min(slow.size, args.max_frames)).round()
     positions = [int(k) for k in slow[np.unique(pick.astype(int))]]
-    drawn: list[np.ndarray] = []            # velocities of the frames read, in step with them
-
-    def frames():
-        for k in positions:
-            f = stream.read_or_skip(k)
-            if f is not None:
-                drawn.append(vel[k])
-                yield f
-
-    prog = Progress(len(positions), f"{args.radar} phase", enabled=not args.quiet)
+    frames = _Picked(stream, positions)
+    passes = estimation_passes(rc)
+    prog = Progress(passes * len(positions), f"{args.radar} phase", enabled=not args.quiet)
     with prog:
-        est = estimate_phase_calibration(frames(), rc, progress=prog.update,
-                                         velocities=None if unknown else drawn)
+        est = estimate_phase_calibration(frames, rc, progress=prog.update,
+                                         velocities=None if unknown else vel[positions])
     write_phase_frequency_calib(out, est.calibration, overwrite=args.overwrite)
     if not args.quiet:
         fit = est.fit
@@ -113,6 +122,9 @@ def run_phase(args: argparse.Namespace) -> int:
               f"in {est.frames} of {n} frames of {seq.name}")
         print(f"  one-scatterer fit: median {100 * np.median(fit.residual[fit.used]):.2g} % of "
               "a used cell's power left")
+        if est.delay is not None:
+            print(f"  channel delays: {np.ptp(est.delay):.3f} range bins from first to last "
+                  "(measured: the run has no calibration)")
         base = "relative to the run's calibration" if rc.phase_frequency is not None else \
             "uncalibrated board"
         tx, std = est.tx_phase_deg(), fit.phase_std_deg

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 import warnings
 from functools import cached_property, partial
 from pathlib import Path
@@ -365,19 +366,22 @@ def _find_calib_near(run_path: Path, layout: RunLayout = COLORADAR) -> Path | No
 
 def resolve_calibration(calib: Calibration | str | os.PathLike[str] | None,
                         run_path: Path | None = None,
-                        layout: str | RunLayout = COLORADAR) -> Calibration:
+                        layout: str | RunLayout = COLORADAR,
+                        sensors: Collection[str] | None = None) -> Calibration:
     """A :class:`Calibration` from an object, a path, or by looking next to ``run_path``.
 
     With ``calib=None`` the calibration is looked for in ``<run>/calib``, then beside the run
     (``calib/`` or ``calib.zip`` in its parent folder; for ColoRadar+, beside ``kitti/``); if
     none is found the built-in presets are used with a :class:`CalibrationWarning`.
-    ``layout`` says which radars the calib folder holds and how its transforms are named.
+    ``layout`` says which radars the calib folder holds and how its transforms are named;
+    ``sensors``, which sensors the run has (values taken from the presets are warned about
+    for these only; None: all).
     """
     lay = get_layout(layout)
     if isinstance(calib, Calibration):
         return calib
     if calib is not None:
-        return load_calibration(calib, layout=lay)
+        return load_calibration(calib, layout=lay, sensors=sensors)
     found = _find_calib_near(run_path, lay) if run_path is not None else None
     if found is None:
         calib = load_calibration(None)
@@ -387,7 +391,7 @@ def resolve_calibration(calib: Calibration | str | os.PathLike[str] | None,
                       f"extrinsics of {', '.join(calib.transforms)}", CalibrationWarning,
                       stacklevel=3)
         return calib
-    return load_calibration(found, layout=lay)
+    return load_calibration(found, layout=lay, sensors=sensors)
 
 
 def open_sequence(path: str | os.PathLike[str],
@@ -431,4 +435,5 @@ def open_sequence(path: str | os.PathLike[str],
         if not is_run(prod, COLORADAR):
             raise MissingDataError(f"{products}: not an output folder of coloradar process "
                                    "(no <radar>/heatmaps or <radar>/pointclouds inside)")
-    return Sequence(src, resolve_calibration(calib, p, lay), name, lay, prod)
+    has = [f for f in lay.sensor_folders if src.is_dir(f)]
+    return Sequence(src, resolve_calibration(calib, p, lay, has), name, lay, prod)
