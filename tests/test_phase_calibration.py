@@ -23,13 +23,13 @@ from coloradar.calib import (
 from coloradar.cli.main import main
 from coloradar.dataset import open_sequence
 from coloradar.dsp import RadarProcessor
-from coloradar.geometry import rig_velocity, trajectory_from_groundtruth
 from coloradar.dsp.phase_estimate import (
     PhaseEstimateSettings,
     estimate_phase_calibration,
     gauge_aligned_error,
     self_calibrate,
 )
+from coloradar.geometry import rig_velocity, trajectory_from_groundtruth
 from coloradar.sim import PhaseErrors, apply_channel_errors, synthesize_adc
 from coloradar.sim.run import simulate_run
 from coloradar.sim.truth import load_truth
@@ -68,7 +68,7 @@ def planted_cells(name: str, k: int, seed: int, tx_deg: float, rx_deg: float, ch
 
 
 def test_gauge_aligned_error_ignores_ramps_and_sees_the_rest():
-    tx, rx, rho = positions("single_chip")
+    tx, rx, _ = positions("single_chip")
     vp = tx[:, None, :] + rx[None, :, :]
     truth = np.exp(1j * np.random.default_rng(1).uniform(-np.pi, np.pi, vp.shape[:2]))
     ramp = np.exp(1j * (0.7 + 0.4 * vp[..., 0] - 1.1 * vp[..., 1]))
@@ -115,17 +115,21 @@ def test_pure_tx_errors_are_recovered_in_the_gauge():
 # ---------------------------------------------------------------- simulated boards
 @pytest.fixture(scope="module")
 def boards(tmp_path_factory):
-    """Runs of a slow rig in a corridor from boards with planted TX errors and no phase
-    calibration: single chip (TX slots ±180°, RX ±10°, 2 dB) and cascade (its own random
-    channel errors, now uncalibrated, plus TX slots ±180°)."""
+    """Runs of a slow rig in a corridor from boards with planted errors (TX slots ±180°, RX
+    ±10°, 2 dB): the single chip and the cascade with no phase calibration (the cascade's own
+    random channel phases and delays then unknown too), and the cascade whose calibration
+    knows its own errors but not the planted ones (a TX path that drifted)."""
     out = tmp_path_factory.mktemp("phase_boards")
     runs = {}
-    for name, sensors, seed in (("single_chip", ["single_chip", "groundtruth"], 3),
-                                ("cascade", ["cascade", "groundtruth"], 4)):
-        errs = PhaseErrors(name, tx_phase_deg=180.0, rx_phase_deg=10.0, gain_db=2.0)
-        res = simulate_run(out / name, scene="corridor", duration=4.0, seed=seed,
-                           sensors=sensors, heatmaps=False, phase_errors=errs, board_seed=seed)
-        runs[name] = res.run_path
+    for key, name, calibration, seed in (("single_chip", "single_chip", "none", 3),
+                                         ("cascade", "cascade", "none", 4),
+                                         ("cascade_stale", "cascade", "board", 5)):
+        errs = PhaseErrors(name, tx_phase_deg=180.0, rx_phase_deg=10.0, gain_db=2.0,
+                           calibration=calibration)
+        res = simulate_run(out / key, scene="corridor", duration=4.0, seed=seed,
+                           sensors=[name, "groundtruth"], heatmaps=False, phase_errors=errs,
+                           board_seed=seed)
+        runs[key] = res.run_path
     return runs
 
 
@@ -164,7 +168,8 @@ def test_uncalibrated_board_gives_no_aliased_points(boards, name):
 
 def fast_trials(calib, hardware: PhaseFrequencyCalib, proc, v_range, trials, seed):
     """As tests/test_dsp_honest_detection.py's trials: one target beyond v_max per frame,
-    on a board with ``hardware``'s errors; (azimuth error in bins, rate error in bins)."""
+    on a board with ``hardware``'s errors; (signed azimuth error in bins, rate error in
+    bins)."""
     w = calib.waveform
     g = np.random.default_rng(seed)
     out = []
@@ -183,24 +188,29 @@ def fast_trials(calib, hardware: PhaseFrequencyCalib, proc, v_range, trials, see
             continue
         j = int(np.argmax(det.power))
         az_bin = 2.0 / (proc.grid.num_az * proc.grid.rho)
-        out.append((abs(det.xyz[j, 1] / det.range[j] - u[1]) / az_bin,
+        out.append(((det.xyz[j, 1] / det.range[j] - u[1]) / az_bin,
                     abs(det.range_rate[j] - v) / w.velocity_bin_width))
     return np.array(out)
 
 
-@pytest.mark.parametrize(("name", "v_range"), [("single_chip", (1.1, 1.7)),
-                                                ("cascade", (1.3, 2.3))])
-def test_measured_calibration_resolves_fast_targets_again(boards, name, v_range):
+@pytest.mark.parametrize(("key", "v_range", "gauge"), [("single_chip", (1.1, 1.7), False),
+                                                       ("cascade_stale", (1.3, 2.3), False),
+                                                       ("cascade", (1.3, 2.3), True)])
+def test_measured_calibration_resolves_fast_targets_again(boards, key, v_range, gauge):
     """Measured on the slow run, the calibration lets the alias search resolve targets at
     1.1-2.3 v_max on the same board as on a matched one (≥ 90 % of 30 trials within one
     azimuth bin and 1.5 Doppler bins, the criterion of the perfect-array test); without it
-    they stay folded."""
-    seq = _sequence(boards[name])
+    they stay folded. ``gauge``: the cascade measured from nothing (its per-channel phases and
+    delays unknown) has an azimuth offset that no data without a known direction fixes
+    (docs/calibration.md; the static scene's Doppler narrows it): there the azimuth is
+    checked after the trials' common offset is removed."""
+    name = key.split("_")[0] if key.startswith("cascade") else key
+    seq = _sequence(boards[key])
     rc = seq.calib.radar(name)
-    gains = load_truth(boards[name])[f"{name}/channel_gain"]
+    truth = load_truth(boards[key])
     w = rc.waveform
-    hardware = PhaseFrequencyCalib(np.zeros(gains.shape), gains, w.slope, w.sample_rate,
-                                   near_field=False)
+    hardware = PhaseFrequencyCalib(truth[f"{name}/channel_delay"], truth[f"{name}/channel_gain"],
+                                   w.slope, w.sample_rate, near_field=False)
     adc = seq.radar(name).adc
     vel = rig_velocity(trajectory_from_groundtruth(seq), adc.timestamps, calib=seq.calib,
                        sensor=name).linear
@@ -208,11 +218,14 @@ def test_measured_calibration_resolves_fast_targets_again(boards, name, v_range)
     calibrated = with_phase_calibration(seq.calib, est.calibration, name).radar(name)
     proc = RadarProcessor(calibrated, coupling_subtraction=False, phase_centre=False)
     res = fast_trials(calibrated, hardware, proc, v_range, 30, seed=7)
-    good = (res[:, 0] <= 1.0) & (res[:, 1] <= 1.5)
+    if gauge:
+        res[:, 0] = np.abs(res[:, 0] - np.median(res[:, 0]))
+    good = (np.abs(res[:, 0]) <= 1.0) & (res[:, 1] <= 1.5)
     assert good.mean() >= 0.9, res[~good]
-    folded = fast_trials(rc, hardware, RadarProcessor(rc, coupling_subtraction=False,
-                                                       phase_centre=False), v_range, 6, seed=8)
-    assert np.all(folded[:, 1] > 1.5)
+    # before: folded where there is no calibration, fooled where it has gone stale
+    before = fast_trials(rc, hardware, RadarProcessor(rc, coupling_subtraction=False,
+                                                       phase_centre=False), v_range, 10, seed=8)
+    assert np.mean((np.abs(before[:, 0]) <= 1.0) & (before[:, 1] <= 1.5)) <= 0.5, before
 
 
 def test_calibrate_phase_command(boards, tmp_path, capsys):

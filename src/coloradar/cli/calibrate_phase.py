@@ -111,7 +111,8 @@ def run_phase(args: argparse.Namespace) -> int:
     positions = [int(k) for k in slow[np.unique(pick.astype(int))]]
     frames = _Picked(stream, positions)
     passes = estimation_passes(rc)
-    prog = Progress(passes * len(positions), f"{args.radar} phase", enabled=not args.quiet)
+    prog = Progress(passes * len(positions), f"{args.radar} phase", unit="frame passes",
+                    enabled=not args.quiet)
     with prog:
         est = estimate_phase_calibration(frames, rc, progress=prog.update,
                                          velocities=None if unknown else vel[positions])

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Collection
 import warnings
+from collections.abc import Collection
 from functools import cached_property, partial
 from pathlib import Path
 

@@ -18,20 +18,20 @@ directions on the reference TX's channels alone, where no TX error can reach the
 
 What the data cannot tell (the gauge). A linear phase ramp across the virtual array moves every
 direction by the same amount, and nothing but a target in a known direction can tell the two
-apart. The estimate is fixed so that (a) in azimuth the RX phases, averaged over TX, have no
+apart. The estimate is fixed so: (a) in azimuth, the RX phases (averaged over TX) get no
 linear trend along the RX positions (receivers on one chip share its LO and are matched far
 better than the TX paths, so a TX phase error is left where it is); where they do not lie on
 a line (the cascade's four chips: :data:`MATCHED_RX_DEG`) and the radar's velocity is known
 (the run's ground truth), the directions are made to agree with the static scene's Doppler
-instead (``rate = −v·u``: :func:`doppler_azimuth_offset`); and (b) in elevation, where only the TX positions differ
-(the single chip's one elevated TX: its phase *is* an elevation offset), by
-``elevation_reference``: ``"scene"`` (default) puts the median elevation of the cells used at
-zero (a level radar sees about as much above as below its horizon: walls, not floors,
-dominate), ``"tx"`` makes the TX phases trend-free along their elevations (the elevated TX
+instead (``rate = −v·u``: :func:`doppler_azimuth_offset`); (b) in elevation, where only the
+TX positions differ (the single chip's one raised TX: its phase *is* an elevation offset),
+by ``elevation_reference``: ``"scene"`` (default) puts the median elevation of the cells used
+at zero (a level radar sees about as much above as below its horizon: walls, not floors,
+dominate), ``"tx"`` makes the TX phases trend-free along their elevations (the raised TX
 matched to the reference one). Without a velocity an RX phase slope, and with ``"scene"`` the
-scene's own median elevation, remain as a bias of the azimuth or the elevation; neither touches the Doppler
-alias choice, which reads the phase steps between the TX slots of the azimuth row.
-Comparisons with a true calibration remove the best-fitting ramps first
+scene's own median elevation, remain as biases of the azimuth and the elevation; neither
+touches the Doppler alias choice, which reads the phase steps between the TX slots of the
+azimuth row. Comparisons with a true calibration remove the best-fitting ramps first
 (:func:`gauge_aligned_error`).
 """
 
@@ -39,7 +39,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import scipy.fft as sfft
@@ -49,13 +49,30 @@ from ..errors import MissingDataError, SettingsError
 from .angle import refine_peak
 from .tdm import tdm_phase
 
-SequenceOf = Sequence["np.ndarray | None"]
-"""Frames with ``len`` and indexing (an ``AdcStream``, a list)."""
 
-__all__ = ["PhaseEstimate", "PhaseEstimateSettings", "SelfCalibration", "doppler_azimuth_offset",
-           "frame_cells",
-           "estimation_passes", "gauge_aligned_error", "measured_calibration",
-           "self_calibrate", "estimate_phase_calibration"]
+class SequenceOf(Protocol):
+    """Frames with ``len`` and indexing (an ``AdcStream``, a list; None: unreadable)."""
+
+    def __len__(self) -> int: ...
+
+    def __getitem__(self, i: int, /) -> np.ndarray | None: ...
+
+
+Velocities = Sequence[np.ndarray] | np.ndarray
+"""Per frame, the radar's velocity in its own frame, float ``(3,)`` [m/s]."""
+
+__all__ = [
+    "PhaseEstimate",
+    "PhaseEstimateSettings",
+    "SelfCalibration",
+    "doppler_azimuth_offset",
+    "estimate_phase_calibration",
+    "estimation_passes",
+    "frame_cells",
+    "gauge_aligned_error",
+    "measured_calibration",
+    "self_calibrate",
+]
 
 
 @dataclass(frozen=True)
@@ -150,7 +167,8 @@ class _Beams:
         for k0 in range(0, k, chunk):
             yk = y[k0:k0 + chunk]
             grid = np.zeros((yk.shape[0], self.n_az, self.n_el), dtype=np.complex64)
-            np.add.at(grid, (slice(None), self.ipos[:, 0], self.ipos[:, 1]), yk)
+            rows = np.arange(yk.shape[0])[:, None]
+            np.add.at(grid, (rows, self.ipos[None, :, 0], self.ipos[None, :, 1]), yk)
             p = np.abs(sfft.fft2(grid, axes=(1, 2))).reshape(yk.shape[0], -1)
             best[k0:k0 + chunk] = np.argmax(np.where(vis[None], p, -1.0), axis=1)
         return np.stack([self.uy.ravel()[best], self.uz.ravel()[best]], axis=1)
@@ -295,12 +313,18 @@ def self_calibrate(cells: np.ndarray, tx_pos: np.ndarray, rx_pos: np.ndarray, rh
     w = _refine(y, pos, beams.peaks(y, use_el), step, use_el)
     reference = "receivers"
     if doppler is not None and receiver_spread(g.reshape(ntx, nrx)) > MATCHED_RX_DEG:
-        dy = doppler_azimuth_offset(w[used], doppler[0][used], doppler[1][used], 1.0 / rho)
-        if dy is not None:                        # as below: directions move by −dy
-            g = g * np.exp(-1j * np.pi * rho * vp[:, 0] * dy)
-            y = x / g                             # (found again: a shift wraps them)
+        for _ in range(4):
+            # found again after each shift (which wraps them and changes which cells lie in
+            # the visible region), until the shift is below a hundredth of an azimuth bin
+            dy = doppler_azimuth_offset(w[used], doppler[0][used], doppler[1][used], 1.0 / rho)
+            if dy is None:
+                break
+            g = g * np.exp(-1j * np.pi * rho * vp[:, 0] * dy)   # as below: w moves by −dy
+            y = x / g
             w = _refine(y, pos, beams.peaks(y, use_el), step, use_el)
             reference = "doppler"
+            if abs(dy) < 0.01 * step[0]:
+                break
     if use_el and s.elevation_reference == "scene":
         # x = g ⊙ s(w) = (g·e^{−jπρ·el·δ}) ⊙ s(w − δ ẑ): the scene's median elevation to zero
         delta = float(np.median(w[used, 1]))
@@ -489,7 +513,7 @@ def measured_calibration(calib: RadarCalib, gain: np.ndarray,
 
 
 def _collect(proc, frames: SequenceOf, s: PhaseEstimateSettings,
-             velocities: Sequence[np.ndarray] | None,
+             velocities: Velocities | None,
              progress: Callable[[int], None] | None) -> tuple[list, list, list, list]:
     """Cells, range rates, velocities and channel range offsets of every frame."""
     parts: list = []
@@ -516,8 +540,8 @@ def estimation_passes(calib: RadarCalib) -> int:
     """Passes over the frames :func:`estimate_phase_calibration` makes: 4 for a radar without
     a calibration (its channels' delays are measured first, then the phases on frames with
     them removed, twice more with the delays corrected on the cells found to hold one
-    scatterer), 1 for one whose calibration holds the delays (at most 4: fewer when no delay
-    could be measured)."""
+    scatterer), 1 for one whose calibration holds the delays (2 where the channels show none:
+    one LO, as on the single chip)."""
     return 1 if calib.phase_frequency is not None else 4
 
 
@@ -538,8 +562,7 @@ def _median_offsets(offs: list, used: np.ndarray | None) -> np.ndarray | None:
 def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
                                settings: PhaseEstimateSettings | None = None,
                                progress: Callable[[int], None] | None = None,
-                               velocities: Sequence[np.ndarray] | None = None
-                               ) -> PhaseEstimate:
+                               velocities: Velocities | None = None) -> PhaseEstimate:
     """Measure a radar's per-channel phases and gains (and, without a calibration, delays)
     from its ADC frames.
 
@@ -556,7 +579,8 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
     settings
         :class:`PhaseEstimateSettings`.
     progress
-        Called with 1 after each frame of each pass.
+        Called with the frames done: 1 after each frame of each pass (more at once for the
+        passes a board without delays does not need).
     velocities
         ``velocities[i]``: the radar's velocity in its own frame at frame ``i``, float
         ``(3,)`` [m/s] (the ground truth's; NaN where unknown), or None. With them the azimuth
@@ -568,7 +592,7 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
     """
     from dataclasses import replace
 
-    from .processor import RadarProcessor            # processor imports this layer's stages
+    from .processor import RadarProcessor  # processor imports this layer's stages
 
     s = settings or PhaseEstimateSettings()
     ant = calib.antenna
@@ -587,6 +611,12 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
         # scatterer (measured on simulated cascade runs: 0.12 → 0.04 → 0.02 → 0.016 bins rms).
         _, _, _, offs = _collect(RadarProcessor(calib), frames, s, None, progress)
         delay = _median_offsets(offs, None)
+        if delay is not None and not np.any(delay):
+            # One LO (the single chip): on a single scatterer every channel's range profile is
+            # the same, and the median offsets are exactly zero: no delays, one more pass.
+            delay = None
+            if progress is not None:
+                progress(2 * len(frames))             # the passes that are not needed
         if delay is not None:
             delay = delay * to_frame
             base = replace(calib, phase_frequency=measured_calibration(

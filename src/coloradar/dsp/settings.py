@@ -17,10 +17,26 @@ from .cfar import CFAR_KINDS, CFARKind
 from .heatmap import ENGINES
 from .windows import WINDOWS, WindowName
 
-__all__ = ["ANGLE_METHODS", "CFAR_LOOKS", "COUPLING_DOMAINS", "NOISE_WEIGHTINGS", "AliasSettings",
-           "AngleMethod", "AngleSettings", "ArraySettings", "CFARLooks", "CFARSettings",
-           "CouplingDomain", "CubeSettings", "GuardSettings", "NoiseWeighting", "PointSettings",
-           "ProcessingSettings", "UNCALIBRATED_ALIAS", "UncalibratedAlias"]
+__all__ = [
+    "ANGLE_METHODS",
+    "CFAR_LOOKS",
+    "COUPLING_DOMAINS",
+    "NOISE_WEIGHTINGS",
+    "UNCALIBRATED_ALIAS",
+    "AliasSettings",
+    "AngleMethod",
+    "AngleSettings",
+    "ArraySettings",
+    "CFARLooks",
+    "CFARSettings",
+    "CouplingDomain",
+    "CubeSettings",
+    "GuardSettings",
+    "NoiseWeighting",
+    "PointSettings",
+    "ProcessingSettings",
+    "UncalibratedAlias",
+]
 
 CouplingDomain = Literal["raw", "calibrated"]
 """What the coupling file is the range FFT of: uncalibrated or calibrated samples."""

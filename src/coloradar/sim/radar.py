@@ -25,6 +25,7 @@ Per frame (timestamp = start of the frame's first chirp):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import scipy.fft
@@ -248,16 +249,19 @@ class PhaseErrors:
         slot 0 and RX 0 are the reference (their errors are relative).
     gain_db
         Spread [dB] of the TX and RX gains, each drawn uniformly in ``[−g, g]``.
-    calibrated
-        Whether the calib folder gets the calibration that removes the errors (False: the
-        radar's calib has no ``phase_frequency_calib.txt``, as an uncalibrated board).
+    calibration
+        What the calib folder holds: ``"none"`` no ``phase_frequency_calib.txt`` (an
+        uncalibrated board: the cascade's own channel errors and delays are then unknown
+        too); ``"board"`` the board's own calibration without the planted errors (the
+        cascade's, or the single chip's unit one: a calibration gone stale, a TX path that
+        drifted); ``"all"`` the one that removes everything.
     """
 
     radar: str = "single_chip"
     tx_phase_deg: tuple[float, ...] | float = 180.0
     rx_phase_deg: tuple[float, ...] | float = 0.0
     gain_db: float = 0.0
-    calibrated: bool = False
+    calibration: Literal["none", "board", "all"] = "none"
 
     def gains(self, num_tx: int, num_rx: int, rng: np.random.Generator) -> np.ndarray:
         """complex128 ``(tx, rx)``: ``x = g · ideal`` per channel, ``g[0, 0] = 1``."""

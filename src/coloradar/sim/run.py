@@ -50,13 +50,13 @@ from ..calib import (
     RADARS,
     Calibration,
     CouplingCalib,
+    PhaseFrequencyCalib,
     RadarCalib,
     format_antenna_cfg,
     format_coupling_calib,
     format_heatmap_cfg,
     format_phase_frequency_calib,
     format_transform,
-    PhaseFrequencyCalib,
     format_waveform_cfg,
     identity_phase_calib,
     preset_radar,
@@ -241,8 +241,8 @@ def _with_phase_errors(calib: Calibration, planted: PhaseErrors | None, board_se
                       ) -> tuple[Calibration, dict[str, PhaseFrequencyCalib | None]]:
     """``SimulationSpec.phase_errors``: the calibration to write and each radar's hardware
     errors (what its frames carry: the cascade's calibrated channel errors; the single chip's
-    none), with the planted errors on top. An uncalibrated radar's calib loses its phase
-    calibration; a calibrated one gets the errors' own."""
+    none), with the planted errors on top; the calib holds what ``planted.calibration``
+    says."""
     hardware: dict[str, PhaseFrequencyCalib | None] = {
         "cascade": calib.cascade.phase_frequency, "single_chip": None}
     if planted is None:
@@ -261,7 +261,11 @@ def _with_phase_errors(calib: Calibration, planted: PhaseErrors | None, board_se
     hw = PhaseFrequencyCalib(base.frequency, base.phase * g, base.slope, base.sample_rate,
                              near_field=base.near_field)
     hardware[planted.radar] = hw
-    new = replace(rc, phase_frequency=hw if planted.calibrated else None)
+    if planted.calibration not in ("none", "board", "all"):
+        raise ColoradarError(f"phase_errors.calibration must be none, board or all, got "
+                             f"{planted.calibration!r}")
+    held = {"none": None, "board": base, "all": hw}[planted.calibration]
+    new = replace(rc, phase_frequency=held)
     radars = {r: (new if r == planted.radar else calib.radar(r)) for r in RADARS}
     return replace(calib, cascade=radars["cascade"], single_chip=radars["single_chip"]), hardware
 
@@ -440,8 +444,9 @@ def _radar_task(ctx: _Context, radar: str, times: np.ndarray) -> dict[str, np.nd
            f"{radar}/offsets": np.asarray(offsets, dtype=np.int64),
            f"{radar}/coupling": np.fft.fft(ctx.coupling_adc[radar], axis=-1).astype(np.complex64)}
     hw = ctx.hardware.get(radar)
-    if hw is not None:                   # x = g·ideal per channel (P[t,r]/P[0,0])
+    if hw is not None:                   # x = g·ideal per channel (P[t,r]/P[0,0]), delays
         out[f"{radar}/channel_gain"] = (1.0 / hw.relative_phase()).astype(np.complex128)
+        out[f"{radar}/channel_delay"] = hw.relative_frequency()
     for k, parts in acc.items():
         empty = np.zeros((0, 3) if k in ("position", "velocity") else 0,
                          dtype=np.int64 if k == "ident" else np.float32)
@@ -564,18 +569,11 @@ def simulate_run(out: str | os.PathLike[str], spec: SimulationSpec | None = None
         (an estimator must read a radar frame stamped ``t`` as the motion at ``t + t_d`` of
         the IMU and ground-truth clock). Recorded in the truth as ``radar_time_offset``.
     coupling_calib
-        A ``coupling_calib.txt`` (path, or a :class:`~coloradar.calib.CouplingCalib`) that the
-        calibration of the radar of its size carries instead of the simulator's own: the
-        released single-chip file, say. The frames carry its coupling on every TX it holds and
-        the simulator's own leakage on a TX whose block is all zeros (the release's TX 2), so
-        that they have coupling on every TX whatever the file lacks. The truth holds what the
-        frames carry (``<radar>/coupling``).
+        A ``coupling_calib.txt`` (path, or a :class:`~coloradar.calib.CouplingCalib`) that
+        the radar of its size carries instead of the simulator's own (the released single
+        chip's, say); its frames carry it, and the simulator's own on an all-zero TX block.
     phase_errors
-        :class:`~coloradar.sim.radar.PhaseErrors` planted on one radar's channels (per-TX
-        and per-RX phases and gains, on top of the cascade's own channel errors); unless
-        ``calibrated``, that radar's calib holds no phase calibration, as a real uncalibrated
-        board's. The truth holds each radar's channel gains ``<radar>/channel_gain``
-        (``x = g·ideal``, relative to channel (0, 0)).
+        :class:`~coloradar.sim.radar.PhaseErrors` planted on one radar (truth: channel_gain).
 
     Returns
     -------

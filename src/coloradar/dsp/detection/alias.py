@@ -102,7 +102,6 @@ class AliasStage:
         dv = self.cube.velocities[1] - self.cube.velocities[0]
         rates = (k_signed[:, None] + hyps[None, :] * nd) * dv                  # (K, H)
         allowed = (np.abs(rates) <= self.settings.doppler_unwrap) | (hyps[None, :] == 0)
-        spectra = None
         if self.pairs is not None:
             score = self.pairs.scores(vecs.reshape(ntx * nrx, k).T, hyps)
         else:
