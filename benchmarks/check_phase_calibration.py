@@ -67,22 +67,34 @@ def synthetic(seeds: int) -> None:
                   f"worst {max(worst):.2f}; {np.median(dt):.2f} s")
 
 
-SCENARIOS = (("single_chip", "none"), ("cascade", "none"), ("cascade", "board"))
-"""(radar, what its calib holds: no phase calibration, or the board's own gone stale)."""
+RELEASED = (Path(__file__).resolve().parents[2] / "shared" / "reference" / "coloradar_calib"
+            / "cascade" / "phase_frequency_calib.txt")
+"""The release's cascade calibration (read, never copied), planted as a board's errors."""
+SCENARIOS = (("single_chip", "none", None), ("cascade", "none", None),
+             ("cascade", "board", None), ("cascade", "none", RELEASED))
+"""(radar, what its calib holds: no phase calibration, or the board's own gone stale; the
+board's own errors: the simulator's, or the release's file)."""
 
 
-def simulated(seeds: int, trials: int, root: Path) -> None:
+def simulated(seeds: int, trials: int, root: Path, only: list[int] | None = None) -> None:
     print("2-4. simulated corridor runs, 4 s, rig at 0.85 m/s, planted TX ±180°, RX ±10°, "
           "2 dB; calib: none, or the board's own without the planted errors (stale)")
-    for name, calibration in SCENARIOS:
+    for k, (name, calibration, board) in enumerate(SCENARIOS):
+        if only is not None and k not in only:
+            continue
+        if board is not None and not board.is_file():
+            print(f"   (the release's calibration is not at {board}: its scenario is left out)")
+            continue
         for seed in range(seeds):
-            out = root / f"{name}{calibration}{seed}"
+            out = root / f"{name}{calibration}{board is not None}{seed}"
+            # the release's errors alone (what it recovers of them), or planted ones on top
+            errs = (PhaseErrors(name, 0.0, 0.0, 0.0, calibration, str(board)) if board else
+                    PhaseErrors(name, 180.0, 10.0, 2.0, calibration))
             res = simulate_run(out, scene="corridor", duration=4.0, seed=seed,
                                sensors=[name, "groundtruth"], heatmaps=False, board_seed=seed,
-                               phase_errors=PhaseErrors(name, tx_phase_deg=180.0,
-                                                        rx_phase_deg=10.0, gain_db=2.0,
-                                                        calibration=calibration))
-            print(f"   {name:12s} {calibration:5s} seed {seed}: "
+                               phase_errors=errs)
+            label = "release" if board else calibration
+            print(f"   {name:12s} {label:7s} seed {seed}: "
                   + one_run(res.run_path, name, trials, seed), flush=True)
 
 
@@ -122,7 +134,11 @@ def one_run(path: Path, name: str, trials: int, seed: int) -> str:
         p = RadarProcessor(c)
         al = np.concatenate([p.detect(adc[k]).alias for k in range(len(adc))])
         moved[label] = f"{int(np.sum(al != 0))}/{al.size}"
-    return (f"phase rms {np.sqrt(np.mean(err**2)):.2f}° worst {np.abs(err).max():.2f}°; "
+    derr = ""
+    if est.delay is not None:
+        d = est.delay - est.delay[0, 0]
+        derr = f", delays rms {np.sqrt(np.mean((d - delays) ** 2)):.3f} bins"
+    return (f"phase rms {np.sqrt(np.mean(err**2)):.2f}° worst {np.abs(err).max():.2f}°{derr}; "
             f"{est.cells} cells, {cost:.1f} s, azimuth gauge {est.fit.azimuth_reference} | "
             f"fast targets before {100 * ok['before']:.0f} %, calibrated "
             f"{100 * ok['calibrated']:.0f} % (azimuth offset {ok['offset']:+.2f} bins; "
@@ -134,11 +150,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--trials", type=int, default=40)
+    ap.add_argument("--only", type=int, nargs="+", metavar="K",
+                    help="only these simulated scenarios (indices into SCENARIOS), no part 1")
     args = ap.parse_args()
-    synthetic(args.seeds)
+    if args.only is None:
+        synthetic(args.seeds)
     root = Path(tempfile.mkdtemp(prefix="phasecal"))
     try:
-        simulated(args.seeds, args.trials, root)
+        simulated(args.seeds, args.trials, root, args.only)
     finally:
         shutil.rmtree(root, ignore_errors=True)
 

@@ -49,11 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "standing still, or an object carried with it, looks like coupling). Use "
                     "the file with 'coloradar process --coupling FILE'. Never writes into the "
                     "dataset.")
-    c.add_argument("run", metavar="RUN", help="run folder or .zip")
-    c.add_argument("--out", required=True, metavar="FILE",
-                   help="the coupling_calib.txt to write (outside the dataset)")
-    c.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
-                   help="which radar (default: single_chip)")
+    add_run_out_radar_args(c, "coupling_calib.txt")
     c.add_argument("--statistic", choices=("trimmed", "median", "mean"), default="trimmed",
                    help="how frames are combined (default: trimmed; mean is not robust to "
                         "targets)")
@@ -68,6 +64,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=run)
     from .calibrate_phase import register_phase
     register_phase(what)
+
+
+def add_run_out_radar_args(c: argparse.ArgumentParser, file: str) -> None:
+    """RUN, ``--out FILE`` (a ``file`` to write) and ``--radar`` of a ``calibrate`` command."""
+    c.add_argument("run", metavar="RUN", help="run folder or .zip")
+    c.add_argument("--out", required=True, metavar="FILE",
+                   help=f"the {file} to write (outside the dataset)")
+    c.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
+                   help="which radar (default: single_chip)")
 
 
 def moving_frames(seq, radar: str, times: np.ndarray, min_speed: float) -> np.ndarray:

@@ -19,25 +19,23 @@ from ._common import add_file_output_args, add_quiet_arg, new_output_file, posit
 
 def register_phase(what: argparse._SubParsersAction) -> None:
     """The ``phase`` sub-command of ``coloradar calibrate``."""
+    from .calibrate import add_run_out_radar_args
     c = what.add_parser(
         "phase", help="measure a radar's per-channel phases and gains from a run",
         description="Measure each virtual channel's phase and gain (relative to TX 0, RX 0) "
                     "from a run's ADC frames, and write them as a phase_frequency_calib.txt "
-                    "(the release's format; the channels' delays are kept from the run's "
-                    "calibration, or zero). Strong cells of many frames are each fitted with "
-                    "one scatterer; the gains and the cells' directions are found in turn, "
-                    "cells that one scatterer does not explain left out. Frames in which the "
+                    "(the release's format; the channels' delays kept from the run's "
+                    "calibration, or measured first when it has none). Strong cells of many "
+                    "frames are each fitted with one scatterer; the gains and the cells' "
+                    "directions are found in turn, cells that one scatterer does not explain "
+                    "left out. Frames in which the "
                     "radar moves faster than --max-speed by the ground truth are left out, so "
                     "that the static scene's Doppler is not aliased. A linear phase ramp "
                     "across the array (a direction offset) cannot be measured without a target "
                     "in a known direction; it is fixed as docs/calibration.md says. Use the "
                     "file with 'coloradar process --phase-calib FILE'. Never writes into the "
                     "dataset.")
-    c.add_argument("run", metavar="RUN", help="run folder or .zip")
-    c.add_argument("--out", required=True, metavar="FILE",
-                   help="the phase_frequency_calib.txt to write (outside the dataset)")
-    c.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
-                   help="which radar (default: single_chip)")
+    add_run_out_radar_args(c, "phase_frequency_calib.txt")
     c.add_argument("--max-frames", type=positive_int, default=200, metavar="N",
                    help="use at most N frames, spread evenly over the run (default 200)")
     c.add_argument("--max-speed", type=positive_float, metavar="M_PER_S",

@@ -255,6 +255,10 @@ class PhaseErrors:
         too); ``"board"`` the board's own calibration without the planted errors (the
         cascade's, or the single chip's unit one: a calibration gone stale, a TX path that
         drifted); ``"all"`` the one that removes everything.
+    board
+        A ``phase_frequency_calib.txt`` (path) whose channel errors (delays and gains) the
+        board carries instead of the simulator's own, the release's cascade file say: how well
+        ``coloradar calibrate phase`` recovers a real calibration (docs/calibration.md).
     """
 
     radar: str = "single_chip"
@@ -262,6 +266,7 @@ class PhaseErrors:
     rx_phase_deg: tuple[float, ...] | float = 0.0
     gain_db: float = 0.0
     calibration: Literal["none", "board", "all"] = "none"
+    board: str | None = None
 
     def gains(self, num_tx: int, num_rx: int, rng: np.random.Generator) -> np.ndarray:
         """complex128 ``(tx, rx)``: ``x = g · ideal`` per channel, ``g[0, 0] = 1``."""

@@ -60,6 +60,7 @@ from ..calib import (
     format_waveform_cfg,
     identity_phase_calib,
     preset_radar,
+    read_phase_frequency_calib,
     with_coupling,
     write_calibration,
 )
@@ -258,6 +259,15 @@ def _with_phase_errors(calib: Calibration, planted: PhaseErrors | None, board_se
         raise ColoradarError(f"phase_errors ({planted.radar}): {exc}") from None
     base = rc.phase_frequency or identity_phase_calib(w.num_tx, w.num_rx, w.slope,
                                                       w.sample_rate)
+    if planted.board is not None:
+        f = read_phase_frequency_calib(planted.board)
+        if f.phase.shape != base.phase.shape:
+            raise ColoradarError(f"phase_errors.board {planted.board}: {f.num_tx} x {f.num_rx} "
+                                 f"channels, the {planted.radar} has {w.num_tx} x {w.num_rx}")
+        # its delays in the frame's own bins (the errors are imposed with the frame's slope)
+        scale = (w.slope / f.slope) * (f.sample_rate / w.sample_rate)
+        base = PhaseFrequencyCalib(f.frequency * scale, f.phase, w.slope, w.sample_rate,
+                                   near_field=False)
     hw = PhaseFrequencyCalib(base.frequency, base.phase * g, base.slope, base.sample_rate,
                              near_field=base.near_field)
     hardware[planted.radar] = hw
