@@ -254,3 +254,37 @@ def test_a_matched_board_keeps_the_search():
     assert RadarProcessor(rc).detector.alias.fold
     assert not RadarProcessor(matched(rc)).detector.alias.fold
     assert not RadarProcessor(rc, uncalibrated_alias="search").detector.alias.fold
+
+
+def test_alias_confidence_tracks_the_evidence():
+    """A lone target at 1.4 v_max on a matched single chip: at 25 dB its alias is right and
+    certain; at 3 dB (per channel and cell) the evidence is weak, the mean confidence of the
+    strongest point drops, and a non-folded alias is never taken below the setting."""
+    rc = matched(preset_radar("single_chip"))
+    w = rc.waveform
+    proc = RadarProcessor(rc, coupling_subtraction=False)
+    u = np.array([np.cos(0.3), np.sin(0.3), 0.0])
+    v = 1.4 * w.max_velocity
+    conf = {}
+    for snr in (25.0, 3.0):
+        a = float(np.sqrt(10 ** (snr / 10) * 2 * 2.25 / (w.num_samples * w.num_chirps)))
+        c = []
+        for i in range(6):
+            det = proc.detect(synthesize_adc(rc, [4.0 * u], [v * u], a * 16.0, noise_std=1.0,
+                                             rng=i, precision="single"))
+            if len(det) == 0:
+                continue
+            j = int(np.argmax(det.power))
+            assert det.alias is not None and det.alias_confidence is not None
+            assert np.all(det.alias_confidence[det.alias != 0] >= 0.9)
+            if snr > 10:
+                assert det.alias[j] == 1 and abs(det.range_rate[j] - v) < 2 * w.velocity_bin_width
+            c.append(det.alias_confidence[j])
+        conf[snr] = float(np.mean(c)) if c else 0.0
+    assert conf[25.0] > 0.99 and conf[3.0] < conf[25.0]
+
+
+def test_uncalibrated_disambiguated_heatmaps_keep_folded_cells():
+    rc = preset_radar("single_chip")
+    assert RadarProcessor(rc, heatmap_unwrap=True).detector.cell_aliases(
+        np.zeros((3, 4, rc.waveform.num_chirps, 8), dtype=np.complex64)) is None

@@ -157,7 +157,7 @@ class AliasStage:
         conf = self.confidence(score, best, vecs, noise, rows)
         # Another alias only on evidence: where its probability is below the setting's, the
         # folded rate is kept and the confidence is the folded hypothesis'.
-        weak = (best != folded) & ~(conf >= self.settings.alias_min_confidence)
+        weak = (best != folded) & (conf < self.settings.alias_min_confidence)   # NaN: kept
         if np.any(weak):
             best = np.where(weak, folded, best)
             conf = np.where(weak, self.confidence(score, folded, vecs, noise, rows), conf)
