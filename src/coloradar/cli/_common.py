@@ -34,6 +34,15 @@ def cli_wording(message: str) -> str:
     return _ORIENTATION_STYLE.sub(r"\2", _BOTH_SPELLINGS.sub(r"\1", message))
 
 
+def add_run_out_radar_args(c: argparse.ArgumentParser, file: str) -> None:
+    """RUN, ``--out FILE`` (a ``file`` to write) and ``--radar`` of a ``calibrate`` command."""
+    c.add_argument("run", metavar="RUN", help="run folder or .zip")
+    c.add_argument("--out", required=True, metavar="FILE",
+                   help=f"the {file} to write (outside the dataset)")
+    c.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
+                   help="which radar (default: single_chip)")
+
+
 def add_file_output_args(p: argparse.ArgumentParser) -> None:
     """``--overwrite`` and ``--calib`` of the commands that read one run and write one file."""
     p.add_argument("--overwrite", action="store_true", help="replace an existing output file")

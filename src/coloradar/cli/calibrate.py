@@ -25,6 +25,7 @@ from ..progress import Progress
 from ._common import (
     add_file_output_args,
     add_quiet_arg,
+    add_run_out_radar_args,
     new_output_file,
     non_negative_float,
     positive_int,
@@ -64,15 +65,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(func=run)
     from .calibrate_phase import register_phase
     register_phase(what)
-
-
-def add_run_out_radar_args(c: argparse.ArgumentParser, file: str) -> None:
-    """RUN, ``--out FILE`` (a ``file`` to write) and ``--radar`` of a ``calibrate`` command."""
-    c.add_argument("run", metavar="RUN", help="run folder or .zip")
-    c.add_argument("--out", required=True, metavar="FILE",
-                   help=f"the {file} to write (outside the dataset)")
-    c.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
-                   help="which radar (default: single_chip)")
 
 
 def moving_frames(seq, radar: str, times: np.ndarray, min_speed: float) -> np.ndarray:

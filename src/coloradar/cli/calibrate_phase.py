@@ -14,12 +14,18 @@ from ..errors import DataWarning, MissingDataError
 from ..formats.source import check_input_path
 from ..geometry import rig_velocity, trajectory_from_groundtruth
 from ..progress import Progress
-from ._common import add_file_output_args, add_quiet_arg, new_output_file, positive_float, positive_int
+from ._common import (
+    add_file_output_args,
+    add_quiet_arg,
+    add_run_out_radar_args,
+    new_output_file,
+    positive_float,
+    positive_int,
+)
 
 
 def register_phase(what: argparse._SubParsersAction) -> None:
     """The ``phase`` sub-command of ``coloradar calibrate``."""
-    from .calibrate import add_run_out_radar_args
     c = what.add_parser(
         "phase", help="measure a radar's per-channel phases and gains from a run",
         description="Measure each virtual channel's phase and gain (relative to TX 0, RX 0) "
