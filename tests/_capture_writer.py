@@ -120,14 +120,19 @@ def studio_json(tx_order: list[int], *, w: dict = SMALL, frames: int = 2, lanes:
     return json.dumps(mm, indent=1), json.dumps(setup, indent=1)
 
 
-def cascade_json(tx_order: list[int], *, w: dict, frames: int) -> str:
-    """The MMWCAS JSON: four devices, each with 4 RX and the chirps that fire its TX."""
+def cascade_json(tx_order: list[int], *, w: dict, frames: int, iq_swap: int | None = None) -> str:
+    """The MMWCAS JSON: four devices, each with 4 RX and the chirps that fire its TX; with
+    ``iq_swap``, each device's ``rawDataCaptureConfig.rlDevDataFmtCfg_t.iqSwapSel``."""
     devices = []
     for d in range(4):
         chirps = [(i, (1 << (k - 3 * d)) if 3 * d <= k < 3 * d + 3 else 0)
                   for i, k in enumerate(tx_order)]
         rf = _rf_config(w, 0xF, chirps, len(tx_order), frames, 1)
-        devices.append({"mmWaveDeviceId": d, "rfConfig": rf})
+        dev: dict = {"mmWaveDeviceId": d, "rfConfig": rf}
+        if iq_swap is not None:
+            dev["rawDataCaptureConfig"] = {"rlDevDataFmtCfg_t": {"iqSwapSel": iq_swap,
+                                                                 "chInterleave": 1}}
+        devices.append(dev)
     return json.dumps({"mmWaveDevices": devices}, indent=1)
 
 
@@ -174,10 +179,20 @@ def packet_dump(stream: bytes, *, payload: int = 1456, drop: tuple[int, ...] = (
 
 # ------------------------------------------------------------------------------ MMWCAS
 def write_mmwcas(folder: Path, frames: np.ndarray, ticks_us: np.ndarray, *,
-                 truncate_device: str | None = None, segment: int = 0) -> None:
-    """An MMWCAS capture folder: per device ``<dev>_0000_data.bin`` (per frame, loop, chirp,
-    sample: the device's 4 RX as int16 I, Q) and ``<dev>_0000_idx.bin`` (24-byte header, 48-byte
-    entries with the timestamp at byte 32)."""
+                 truncate_device: str | None = None, segment: int = 0, iq: str = "iq",
+                 file_size: int | None = None) -> None:
+    """An MMWCAS capture folder: per device ``<dev>_<segment>_data.bin`` (per frame, loop,
+    chirp, sample: the device's 4 RX as int16 I, Q; ``iq="qi"``: Q, I, as a device configured
+    with ``iqSwapSel`` 1 sends them) and ``<dev>_<segment>_idx.bin`` (24-byte header ``tag,
+    version, flags, numIdx`` uint32 and ``dataFileSize`` uint64, the bytes written; 48-byte
+    entries ``tag, version`` uint16, ``flags`` uint32, ``width, height`` uint16, four uint32
+    metadata sizes, ``size`` uint32, ``timestamp`` uint64, ``offset`` uint64: TI's
+    ``getValidNumFrames.m``).
+
+    ``file_size``: the data file is extended to that many bytes (zeros, sparse), as mmWave
+    Studio's ``Cascade_Capture.lua`` preallocates each data file at 2047 MB whatever was
+    captured; the index still counts the frames written.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     nf, ntx, _, nl, ns = frames.shape
     for d, dev in enumerate(("master", "slave1", "slave2", "slave3")):
@@ -188,12 +203,17 @@ def write_mmwcas(folder: Path, frames: np.ndarray, ticks_us: np.ndarray, *,
                     for s in range(ns):
                         for r in range(4 * d, 4 * d + 4):
                             v = frames[f, t, r, c, s]
-                            words += [int(v.real), int(v.imag)]
+                            pair = [int(v.real), int(v.imag)]
+                            words += pair if iq == "iq" else pair[::-1]
         data = struct.pack(f"<{len(words)}h", *words)
         per = len(data) // nf
         if dev == truncate_device:
             data = data[:-100]
-        (folder / f"{dev}_{segment:04d}_data.bin").write_bytes(data)
+        path = folder / f"{dev}_{segment:04d}_data.bin"
+        path.write_bytes(data)
+        if file_size is not None:
+            with open(path, "r+b") as fh:
+                fh.truncate(file_size)
         idx = struct.pack("<IIIIQ", 0x1234, 1, 0, nf, len(data))
         for f in range(nf):
             idx += struct.pack("<HHIHH4IIQQ", 1, 1, 0, 0, 0, 0, 0, 0, 0, per,

@@ -187,18 +187,116 @@ def test_mmwcas_folder_round_trips_with_rx_order_and_idx_timestamps(tmp_path):
 
 
 def test_mmwcas_segments_are_read_in_order(tmp_path):
+    """With ``first_frame_skip="recording"`` only the recording's first frame is left out."""
     cap, cfg, fr, ticks = _cascade(tmp_path)
     more = fr[::-1].copy()                               # a second segment, other frames
     cw.write_mmwcas(cap, more, ticks + 150_000, segment=1)
     (tmp_path / "cascade.json").write_text(cw.cascade_json(CASCADE_ORDER, w=CASCADE_W, frames=6))
-    res = import_capture(cap, tmp_path / "run", config=cfg, start_time=0.0)
-    assert res.frames_written == 5
+    res = import_capture(cap, tmp_path / "run", config=cfg, start_time=0.0,
+                         first_frame_skip="recording")
+    assert res.frames_written == 5 and res.left_out == ()
     seq = _open(tmp_path / "run")
     want = np.concatenate([fr, more])[1:]
     for k in range(5):
         np.testing.assert_array_equal(seq.cascade.adc[k], want[k].astype(np.complex64))
     all_ticks = np.concatenate([ticks, ticks + 150_000])
     np.testing.assert_allclose(seq.cascade.adc.timestamps, (all_ticks[1:] - all_ticks[1]) * 1e-6)
+
+
+def test_mmwcas_first_frame_of_every_segment_is_left_out_as_ti_does(tmp_path, capsys):
+    """Issue 41 item 15: TI's cascade processing (``cascade_MIMO_signalProcessing.m``) loops
+    over the segments and, in each, over ``frameIdx = 2:numValidFrames``: the first frame of
+    every segment is left out. The later segments' first frames are holes (no file, a ``nan``
+    timestamp line); no frame is shifted."""
+    cap, cfg, fr, ticks = _cascade(tmp_path)
+    more = fr[::-1].copy()
+    cw.write_mmwcas(cap, more, ticks + 150_000, segment=1)
+    (tmp_path / "cascade.json").write_text(cw.cascade_json(CASCADE_ORDER, w=CASCADE_W, frames=6))
+    res = import_capture(cap, tmp_path / "run", config=cfg, start_time=0.0)
+    assert res.frames_written == 4 and res.left_out == (3,)   # capture frames 0 and 3 out
+    seq = _open(tmp_path / "run")
+    assert list(seq.cascade.adc.frame_ids) == [0, 1, 3, 4]    # run frame k = capture frame k+1
+    for k, want in enumerate([fr[1], fr[2], more[1], more[2]]):
+        np.testing.assert_array_equal(seq.cascade.adc[k], want.astype(np.complex64))
+    all_ticks = np.concatenate([ticks, ticks + 150_000])
+    np.testing.assert_allclose(seq.cascade.adc.timestamps,
+                               (all_ticks[[1, 2, 4, 5]] - all_ticks[1]) * 1e-6)
+    rec = json.loads((tmp_path / "run" / "capture_import.json").read_text())
+    assert rec["left_out"] == [3] and any("segment 0001" in n for n in rec["notes"])
+    # The CLI offers the other rule.
+    assert main(["import-capture", str(cap), str(tmp_path / "run_rec"), "--config", str(cfg),
+                 "--first-frame-skip", "recording"]) == 0
+    assert "5 cascade frames" in capsys.readouterr().out
+
+
+def test_mmwcas_preallocated_data_files_import_with_a_note(tmp_path):
+    """Issue 41 item 14: mmWave Studio's ``Cascade_Capture.lua`` preallocates each data file at
+    2047 MB; the index counts the frames. The frame size comes from the configuration, checked
+    against the index entries' ``size`` and ``offset``; the bytes after the last indexed frame
+    are a note."""
+    calib = cw.truth_calib(CASCADE_ORDER, CASCADE_W, tx_table=cw.CASCADE_TX,
+                           rx_pos=[(a, 0) for a in cw.CASCADE_RX], num_rx=16)
+    fr = cw.target_frames(calib, CASCADE_TARGETS, 3, amplitude=2e4)
+    ticks = 5_000_000 + np.arange(3) * 50_000
+    cap = tmp_path / "capture"
+    size = 2047 * 2**20
+    cw.write_mmwcas(cap, fr, ticks, file_size=size)           # sparse: no disk written
+    cfg = tmp_path / "cascade.json"
+    cfg.write_text(cw.cascade_json(CASCADE_ORDER, w=CASCADE_W, frames=3))
+    assert (cap / "slave3_0000_data.bin").stat().st_size == size
+    res = import_capture(cap, tmp_path / "run", config=cfg, start_time=1.7e9,
+                         keep_first_frame=True)
+    assert res.frames_written == 3
+    seq = _open(tmp_path / "run")
+    for k in range(3):
+        np.testing.assert_array_equal(seq.cascade.adc[k], fr[k].astype(np.complex64))
+    per = 98_304                                               # 64 x 8 x 12 x 4 RX x 4 bytes
+    note = [n for n in res.notes if "after the last indexed frame" in n]
+    assert note and f"master_0000_data.bin {size - 3 * per:,}" in note[0]
+    _assert_targets(tmp_path / "run", "cascade", CASCADE_TARGETS)
+    # An index entry whose size disagrees with the configuration's frame is still an error.
+    idx = cap / "slave2_0000_idx.bin"
+    raw = bytearray(idx.read_bytes())
+    entry = 24 + 48 * 1                                        # frame 1; size at byte 28
+    raw[entry + 28:entry + 32] = (per + 4).to_bytes(4, "little")
+    idx.write_bytes(bytes(raw))
+    with pytest.raises(FormatError, match=r"slave2_0000_idx\.bin: frame 1 of slave2_0000_data"
+                                          r"\.bin is 98,308 bytes .* = 98,304 bytes"):
+        import_capture(cap, tmp_path / "run2", config=cfg)
+    raw[entry + 28:entry + 32] = per.to_bytes(4, "little")
+    raw[entry + 40:entry + 48] = (per + 8).to_bytes(8, "little")  # offset: not after frame 0
+    idx.write_bytes(bytes(raw))
+    with pytest.raises(FormatError, match=r"slave2_0000_idx\.bin: frame 1 .* at byte 98,312, "
+                                          r"but .* put it at 98,304"):
+        import_capture(cap, tmp_path / "run2", config=cfg)
+    assert not (tmp_path / "run2").exists()
+
+
+def test_mmwcas_iq_swap_is_read_as_the_devices_send_it(tmp_path):
+    """Issue 41 item 16: ``iqSwapSel`` is the AWR2243's own output setting (mmWaveLink
+    ``rlDevDataFmtCfg_t``: 0 I first, 1 Q first) and the TDA2 records the words as sent; TI's
+    reader reads I first because TI's scripts configure 0. A Q-first capture is read Q first,
+    with a note naming the difference from TI's reader; ``--iq-order iq`` reads it as TI's
+    reader would (Q + jI)."""
+    calib = cw.truth_calib(CASCADE_ORDER, CASCADE_W, tx_table=cw.CASCADE_TX,
+                           rx_pos=[(a, 0) for a in cw.CASCADE_RX], num_rx=16)
+    fr = cw.target_frames(calib, CASCADE_TARGETS, 2, amplitude=2e4)
+    cap = tmp_path / "capture"
+    cw.write_mmwcas(cap, fr, 5_000_000 + np.arange(2) * 50_000, iq="qi")
+    cfg = tmp_path / "cascade.json"
+    cfg.write_text(cw.cascade_json(CASCADE_ORDER, w=CASCADE_W, frames=2, iq_swap=1))
+    res = import_capture(cap, tmp_path / "run", config=cfg, keep_first_frame=True)
+    assert "complex QI" in res.layout
+    assert any("iqSwapSel 1" in n and "TI's reader" in n for n in res.notes), res.notes
+    seq = _open(tmp_path / "run")
+    np.testing.assert_array_equal(seq.cascade.adc[0], fr[0].astype(np.complex64))
+    _assert_targets(tmp_path / "run", "cascade", CASCADE_TARGETS)
+    res = import_capture(cap, tmp_path / "run_ti", config=cfg, keep_first_frame=True,
+                         iq_order="iq")
+    assert not any("iqSwapSel" in n for n in res.notes)
+    seq = _open(tmp_path / "run_ti")
+    np.testing.assert_array_equal(seq.cascade.adc[1],
+                                  (fr[1].imag + 1j * fr[1].real).astype(np.complex64))
 
 
 def test_mmwcas_missing_or_short_device_file_is_named(tmp_path):
@@ -208,8 +306,9 @@ def test_mmwcas_missing_or_short_device_file_is_named(tmp_path):
         import_capture(cap, tmp_path / "run", config=cfg)
     (tmp_path / "half.json").write_text(cw.cascade_json(CASCADE_ORDER, w=dict(CASCADE_W, loops=4),
                                                          frames=2))
-    with pytest.raises(FormatError, match=r"master_0000_data\.bin: .* 98,304 bytes a frame,"
-                                          r".* 49,152 bytes: the configuration disagrees"):
+    with pytest.raises(FormatError, match=r"master_0000_idx\.bin: frame 0 of master_0000_data"
+                                          r"\.bin is 98,304 bytes .* 49,152 bytes: the "
+                                          r"configuration disagrees"):
         import_capture(cap, tmp_path / "run", config=tmp_path / "half.json")
     (cap / "slave2_0000_data.bin").unlink()
     with pytest.raises(MissingDataError, match=r"missing slave2_0000_data\.bin"):

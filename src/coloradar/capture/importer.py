@@ -77,8 +77,13 @@ class CaptureImport:
         A capture that ends inside a frame: ``"error"`` (FormatError) or ``"drop"`` (the whole
         frames are imported; the cut one is reported).
     keep_first_frame
-        MMWCAS: keep the first frame, which the TDA2 records before the devices' configuration
-        has settled (left out by default).
+        MMWCAS: keep every frame (by default the first frame of a segment is left out, as TI's
+        cascade scripts do: docs/capture.md).
+    first_frame_skip
+        MMWCAS, unless ``keep_first_frame``: leave out the first frame of every segment
+        (``"segment"``, TI's processing scripts) or only the recording's first
+        (``"recording"``). Frames of later segments left out are holes in the run (no file, a
+        ``nan`` timestamp line), reported in ``left_out``.
     overwrite
         Replace an ``OUT_RUN`` written by an earlier import.
     """
@@ -92,6 +97,7 @@ class CaptureImport:
     dropped: Literal["skip", "zero"] = "skip"
     partial_last_frame: Literal["error", "drop"] = "error"
     keep_first_frame: bool = False
+    first_frame_skip: Literal["segment", "recording"] = "segment"
     overwrite: bool = False
 
 
@@ -145,6 +151,7 @@ class _Frames:
     layout: str
     first: int = 0                   # capture frames before the first imported one
     dropped_packets: int = 0
+    skipped: dict[int, str] = field(default_factory=dict)   # frame -> why it is always left out
 
 
 # ----------------------------------------------------------------------- the capture's size
@@ -239,54 +246,120 @@ def _dca1000_frames(path: Path, cfg: CaptureConfig, spec: CaptureImport, packets
                    bad, notes, lay.describe(), 0, dropped)
 
 
+def _device_frames(data: Path, idx: Path, dev_fb: int, cfg: CaptureConfig, d: int,
+                   spec: CaptureImport, notes: list[str]) -> tuple[np.ndarray, np.ndarray, int]:
+    """One device file's indexed frames (bytes), their timestamps and the bytes after them.
+
+    As TI's reader (``read_ADC_bin_TDA2_separateFiles``) the frame size comes from the
+    configuration and the file's first ``numIdx`` frames are read at ``k`` frame sizes; unlike
+    it, the index's own sizes and offsets are checked against that size.
+    """
+    ix = read_idx(idx)
+    what = (f"{cfg.source} makes a device's frame {cfg.num_samples} samples x {cfg.num_loops} "
+            f"loops x {cfg.num_tx} TX x 4 RX = {dev_fb:,} bytes")
+    bad = np.flatnonzero(ix.sizes != dev_fb)
+    if bad.size:
+        k = int(bad[0])
+        raise FormatError(f"{idx}: frame {k} of {data.name} is {int(ix.sizes[k]):,} bytes (the "
+                          f"index's size), but {what}: the configuration disagrees with the "
+                          "capture")
+    want = np.arange(ix.num_frames, dtype=np.int64) * dev_fb
+    bad = np.flatnonzero(ix.offsets != want)
+    if bad.size:
+        k = int(bad[0])
+        raise FormatError(f"{idx}: frame {k} of {data.name} lies at byte {int(ix.offsets[k]):,}, "
+                          f"but frames of {dev_fb:,} bytes one after another put it at "
+                          f"{int(want[k]):,} ({what})")
+    raw = _read_file(data)
+    need = ix.num_frames * dev_fb
+    if raw.size < need:
+        # One device's share of a frame: its four RX.
+        dev_cfg = replace(cfg, num_frames=0, rx_channels=cfg.rx_channels[4 * d:4 * d + 4])
+        n = _whole_frames(raw.size, dev_fb, dev_cfg, str(data), spec.partial_last_frame, notes)
+        raise FormatError(f"{data}: {n} whole frames of {dev_fb:,} bytes but {idx.name} "
+                          f"indexes {ix.num_frames}: frame {n} is "
+                          f"{(n + 1) * dev_fb - raw.size:,} bytes short")
+    if ix.data_size != need:
+        notes.append(f"{idx}: dataFileSize {ix.data_size:,} bytes, but its {ix.num_frames} "
+                     f"frames of {dev_fb:,} bytes are {need:,}; the frames are read")
+    return raw[:need], ix.timestamps, raw.size - need
+
+
+def _first_frames(folder: Path, seg_frames: list[int], spec: CaptureImport, notes: list[str]
+                  ) -> tuple[int, dict[int, str]]:
+    """Capture frames before the first imported one, and the run frames left out as the first
+    of a later segment (``first_frame_skip="segment"``, TI's rule)."""
+    total = sum(seg_frames)
+    if spec.keep_first_frame:
+        return 0, {}
+    if spec.first_frame_skip not in ("segment", "recording"):
+        raise SettingsError(f"first_frame_skip {spec.first_frame_skip!r}; expected segment or "
+                            "recording")
+    skipped: dict[int, str] = {}
+    if spec.first_frame_skip == "segment":
+        starts = np.cumsum([0, *seg_frames[:-1]])
+        for k, a in enumerate(starts[1:], start=1):
+            skipped[int(a) - 1] = (f"the first frame of segment {k:04d} (TI's cascade scripts "
+                                   "skip the first frame of every segment; --first-frame-skip "
+                                   "recording keeps it)")
+    if total - 1 - len(skipped) <= 0:
+        raise FormatError(f"{folder}: {total} frame(s); nothing left after the first of each "
+                          "segment, which TI's cascade scripts skip (--keep-first-frame)")
+    if spec.first_frame_skip == "segment":
+        frames = ", ".join(str(x) for x in [0, *np.cumsum(seg_frames[:-1]).tolist()])
+        notes.append(f"{folder}: the first frame of each of its {len(seg_frames)} segment(s) "
+                     f"left out (capture frames {frames}), as TI's cascade scripts do "
+                     "(--first-frame-skip recording leaves out only the recording's first, "
+                     "--keep-first-frame none)")
+    else:
+        notes.append(f"{folder}: capture frame 0, the recording's first, left out "
+                     "(--keep-first-frame keeps it)")
+    return 1, skipped
+
+
+def _tda2_iq(cfg: CaptureConfig, spec: CaptureImport, notes: list[str]) -> str:
+    """The I/Q order: the devices' ``iqSwapSel`` (applied by the AWR2243 to its output, which
+    the TDA2 records as sent), unless ``--iq-order`` says otherwise."""
+    iq = cfg.iq_order or "iq"
+    if spec.iq_order is None and iq == "qi":
+        notes.append(f"{cfg.source}: iqSwapSel 1: read Q first, as the devices send it "
+                     "(mmWaveLink rlDevDataFmtCfg_t); TI's reader, written for its scripts' "
+                     "iqSwapSel 0, reads I first: pass --iq-order iq if the targets show up "
+                     "mirrored in range")
+    return iq
+
+
 def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Frames:
     notes: list[str] = []
     if cfg.num_devices != 4 or cfg.num_rx != 16:
         raise FormatError(f"{folder}: an MMWCAS capture (four devices of 4 RX) but {cfg.source} "
                           f"configures {cfg.num_devices} device(s) with {cfg.num_rx} RX in all")
-    iq = cfg.iq_order or "iq"
+    iq = _tda2_iq(cfg, spec, notes)
     files = find_cascade_files(folder)
     dev_fb = cfg.frame_nbytes // 4
     arrays: list[list[np.ndarray]] = [[] for _ in DEVICES]
     ticks = []
+    trailing = []
     for seg in files.segments:
         counts = []
         for d, dev in enumerate(DEVICES):
             data, idx = seg[dev]
-            n_idx, _, ts, _ = read_idx(idx)
-            raw = _read_file(data)
-            # The index counts the frames the file holds: their common size is the frame's
-            # (the entries' own size field is not relied on: its meaning is not documented).
-            if n_idx and raw.size > n_idx * dev_fb and raw.size % n_idx == 0:
-                raise FormatError(
-                    f"{data}: {raw.size:,} bytes for the {n_idx} frames {idx.name} indexes, "
-                    f"{raw.size // n_idx:,} bytes a frame, but {cfg.source} makes a device's "
-                    f"frame {cfg.num_samples} samples x {cfg.num_loops} loops x {cfg.num_tx} TX "
-                    f"x 4 RX = {dev_fb:,} bytes: the configuration disagrees with the capture")
-            # One device's share of a frame: its four RX.
-            dev_cfg = replace(cfg, num_frames=0, rx_channels=cfg.rx_channels[4 * d:4 * d + 4])
-            n = _whole_frames(raw.size, dev_fb, dev_cfg, str(data), spec.partial_last_frame,
-                              notes)
-            if n < n_idx:
-                raise FormatError(f"{data}: {n} whole frames of {dev_fb:,} bytes but {idx.name} "
-                                  f"indexes {n_idx}: frame {n} is "
-                                  f"{(n + 1) * dev_fb - raw.size:,} bytes short")
-            counts.append(min(n, n_idx) if n_idx else n)
-            arrays[d].append(raw[:counts[-1] * dev_fb])
+            raw, ts, extra = _device_frames(data, idx, dev_fb, cfg, d, spec, notes)
+            counts.append(raw.size // dev_fb)
+            arrays[d].append(raw)
+            if extra:
+                trailing.append(f"{data.name} {extra:,}")
             if d == 0:
-                ticks.append(ts[:counts[-1]])
+                ticks.append(ts)
         if len(set(counts)) != 1:
             raise FormatError(f"{folder}: the devices' files hold different numbers of frames "
                               f"({', '.join(f'{dv} {c}' for dv, c in zip(DEVICES, counts, strict=True))})")
+    if trailing:
+        notes.append(f"{folder}: bytes after the last indexed frame, not read (preallocated data "
+                     f"files; TI's reader reads only the indexed frames): {'; '.join(trailing)}")
     seg_frames = [a.size // dev_fb for a in arrays[0]]       # frames of each segment
     total = sum(seg_frames)
-    first = 0 if spec.keep_first_frame else 1
-    if total - first <= 0:
-        raise FormatError(f"{folder}: {total} frame(s); nothing left after the first, which the "
-                          "TDA2 records before the configuration settles (--keep-first-frame)")
-    if first:
-        notes.append(f"{folder}: capture frame 0 left out (recorded before the devices' "
-                     "configuration settles; --keep-first-frame keeps it)")
+    first, skipped = _first_frames(folder, seg_frames, spec, notes)
     tk = np.concatenate(ticks)
     unit = timestamp_unit(tk, cfg.frame_period)
     secs = tk.astype(np.float64) * unit
@@ -313,7 +386,7 @@ def _tda2_frames(folder: Path, cfg: CaptureConfig, spec: CaptureImport) -> _Fram
             done += n
 
     return _Frames(total - first, blocks(), times[first:], {}, notes,
-                   f"TDA2, 4 devices, complex {iq.upper()}", first)
+                   f"TDA2, 4 devices, complex {iq.upper()}", first, skipped=skipped)
 
 
 # -------------------------------------------------------------------------------- writing
@@ -380,6 +453,10 @@ def _write_run(tmp: Path, fr: _Frames, radar: str, spec: CaptureImport
         for k in range(block.shape[0]):
             i = a + k
             frame = block[k]
+            if i in fr.skipped:
+                times[i] = np.nan
+                left.append(i)
+                continue
             if i in fr.bad:
                 if spec.dropped == "skip":
                     times[i] = np.nan
@@ -476,9 +553,10 @@ def import_capture(capture: str | os.PathLike[str], out_run: str | os.PathLike[s
     try:
         left, zeroed, written = _write_run(tmp, fr, radar, spec)
         notes = list(fr.notes)
+        why = {**fr.bad, **fr.skipped}
         for i in left + zeroed:
             notes.append(f"capture frame {i + fr.first} "
-                         f"{'left out' if i in left else 'zero-filled'}: {fr.bad[i]}")
+                         f"{'left out' if i in left else 'zero-filled'}: {why[i]}")
         for rel, text in texts.items():
             atomic_write_text(tmp / rel, text)
         record = dict(capture=str(cap.resolve()), config=cfg.source, board=board.name,

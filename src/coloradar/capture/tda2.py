@@ -20,8 +20,8 @@ import numpy as np
 
 from ..errors import FormatError, MissingDataError
 
-__all__ = ["DEVICES", "IDX_ENTRY", "IDX_HEADER", "CascadeFiles", "find_cascade_files",
-           "read_idx", "timestamp_unit"]
+__all__ = ["DEVICES", "IDX_ENTRY", "IDX_HEADER", "CascadeFiles", "FrameIndex",
+           "find_cascade_files", "read_idx", "timestamp_unit"]
 
 DEVICES = ("master", "slave1", "slave2", "slave3")
 """The four AWR2243 of the MMWCAS-RF-EVM, in the order their RX channels are stacked."""
@@ -75,14 +75,37 @@ def find_cascade_files(folder: Path) -> CascadeFiles:
     return CascadeFiles(folder, tuple(segments))
 
 
-def read_idx(path: Path) -> tuple[int, int, np.ndarray, np.ndarray]:
-    """``numIdx``, ``dataFileSize``, the uint64 timestamps and the uint32 byte sizes of the
-    frames of an ``_idx.bin``.
+@dataclass(frozen=True)
+class FrameIndex:
+    """What an ``_idx.bin`` says of its data file.
+
+    Attributes
+    ----------
+    num_frames
+        ``numIdx``: the frames the data file holds.
+    data_size
+        ``dataFileSize``: the bytes written into the data file (TI: "total data size written
+        into file"); a preallocated data file is larger.
+    timestamps, sizes, offsets
+        Per frame: the uint64 timestamp, the uint32 byte size, the uint64 byte offset in the
+        data file (int64 arrays but the timestamps).
+    """
+
+    num_frames: int
+    data_size: int
+    timestamps: np.ndarray
+    sizes: np.ndarray
+    offsets: np.ndarray
+
+
+def read_idx(path: Path) -> FrameIndex:
+    """The header and the ``numIdx`` entries of an ``_idx.bin``.
 
     Raises
     ------
     FormatError
-        A file shorter than its header, or with fewer entries than ``numIdx`` says.
+        A file shorter than its header, an index of 0 frames, or fewer entries than
+        ``numIdx`` says.
     """
     raw = path.read_bytes()
     if len(raw) < IDX_HEADER.itemsize:
@@ -100,8 +123,8 @@ def read_idx(path: Path) -> tuple[int, int, np.ndarray, np.ndarray]:
         raise FormatError(f"{path}: the header says {n} frames but the index holds {have} "
                           f"entries of {IDX_ENTRY.itemsize} bytes")
     entries = np.frombuffer(body[:n * IDX_ENTRY.itemsize], dtype=IDX_ENTRY)
-    return (n, int(head["dataFileSize"]), entries["timestamp"].astype(np.uint64),
-            entries["size"].astype(np.int64))
+    return FrameIndex(n, int(head["dataFileSize"]), entries["timestamp"].astype(np.uint64),
+                      entries["size"].astype(np.int64), entries["offset"].astype(np.int64))
 
 
 def timestamp_unit(ticks: np.ndarray, frame_period: float) -> float:

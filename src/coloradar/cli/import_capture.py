@@ -43,8 +43,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="import the whole frames of a capture that ends inside a frame (default: "
                         "an error saying how many bytes are missing)")
     p.add_argument("--keep-first-frame", action="store_true",
-                   help="MMWCAS: keep the first frame, which the TDA2 records before the "
-                        "configuration settles")
+                   help="MMWCAS: keep every frame (default: the first frame of each segment is "
+                        "left out, as TI's cascade scripts do)")
+    p.add_argument("--first-frame-skip", choices=("segment", "recording"), default="segment",
+                   help="MMWCAS: leave out the first frame of every segment (default, TI's "
+                        "scripts) or only the recording's first")
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUT_RUN when an earlier import-capture wrote it")
     p.set_defaults(func=run)
@@ -63,11 +66,12 @@ def run(args: argparse.Namespace) -> int:
         start_time=args.start_time, iq_order=args.iq_order, lanes=args.lanes,
         capture_format=args.capture_format, dropped="zero" if args.zero_fill else "skip",
         partial_last_frame="drop" if args.drop_partial_frame else "error",
-        keep_first_frame=args.keep_first_frame, overwrite=args.overwrite)
+        keep_first_frame=args.keep_first_frame, first_frame_skip=args.first_frame_skip,
+        overwrite=args.overwrite)
     print(f"{res.run_path}: {res.frames_written} {res.radar} frames from {args.capture} "
           f"({res.board}; {res.layout}) in {res.seconds:.1f} s")
     if res.left_out:
-        print(f"  left out (dropped packets): frames {', '.join(map(str, res.left_out))}")
+        print(f"  left out (notes say why): frames {', '.join(map(str, res.left_out))}")
     if res.zero_filled:
         print(f"  zero-filled (dropped packets): frames {', '.join(map(str, res.zero_filled))}")
     for note in res.notes:
