@@ -403,3 +403,33 @@ def test_a_symlink_loop_a_fifo_and_a_truncated_zip_are_said_as_such(root, tmp_pa
             code, _, err = _cli(cmd, capsys)
             assert code == 1 and text in err and "dataset root folder not found" not in err, err
     assert zipfile.is_zipfile(tmp_path / "run.zip") is False
+
+
+# ------------------------------------------------------------ issue 41, items 12 and 13
+def _doc_texts() -> dict[str, str]:
+    root = Path(__file__).resolve().parents[1]
+    return {p.name: p.read_text(encoding="utf-8")
+            for p in [root / "README.md", *sorted((root / "docs").glob("*.md"))]}
+
+
+def test_quick_starts_show_the_progress_of_long_jobs():
+    """docs/slam.md's quick start simulates 3 minutes of data: with --quiet a newcomer saw
+    nothing for minutes. No quick-start command is silenced."""
+    for name, text in _doc_texts().items():
+        for line in text.splitlines():
+            if line.startswith("$ coloradar simulate") and "--duration" not in line:
+                assert "--quiet" not in line, (name, line)
+
+
+def test_paths_outside_the_repository_are_explained():
+    """Every ../shared/ folder a doc names is explained in the README's section on data we did
+    not write (what it is, that it lies beside the repository, which tests read it)."""
+    texts = _doc_texts()
+    readme = texts["README.md"]
+    assert "## Data we did not write" in readme
+    section = readme.split("## Data we did not write", 1)[1]
+    named = {m.group(1).rstrip("/.") for text in texts.values()
+             for m in re.finditer(r"\.\./shared/((?:real|reference|foreign)(?:/[\w.-]+)?)", text)}
+    for folder in sorted(named):
+        top = "/".join(folder.split("/")[:2])
+        assert f"../shared/{top}" in section, folder
