@@ -410,3 +410,21 @@ def test_scene_takes_radar_points_from_adc_detections(adc_run):
     assert pts[best, 3] == pytest.approx(TARGET_RR, abs=0.12)
     with pytest.raises(MissingDataError, match="ground truth"):
         gather_scene(adc_run, T0, frame="world")
+
+
+@pytest.mark.parametrize(("span_deg", "max_range"), [(76.0, 8.0), (60.0, 16.0)])
+def test_range_azimuth_fan_fills_its_figure_and_its_colour_bar_matches(span_deg, max_range):
+    """Issue 41, item 8: the bird's-eye fan is drawn at equal aspect; its colour bar is as tall
+    as the plot (it stood twice the plot's height) and the plot fills the figure's height
+    (it floated in white space)."""
+    r = np.linspace(0.0, max_range, 64)
+    az = np.radians(np.linspace(-span_deg, span_deg, 64))
+    fig = plot_range_azimuth(np.ones((64, 64)) + np.random.default_rng(0).random((64, 64)),
+                             r, az, mode="bev")
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    bar = ax.collections[0].colorbar.ax
+    box = ax.get_position(original=False)
+    bar_box = bar.get_position(original=False)
+    assert abs(bar_box.height - box.height) <= 0.02 * box.height, (bar_box, box)
+    assert box.height >= 0.6, box                     # fraction of the figure's height

@@ -272,6 +272,7 @@ def _pictures(seq, pictures: dict, folder: Path, overwrite: bool) -> tuple[list[
         return [], ("no pictures: matplotlib is not installed "
                     "(pip install 'coloradar[viz]')")
     from .viz import plot_range_azimuth, plot_scene, save_figure
+    from .viz._figure import colorbar_beside
 
     written: list[Path] = []
 
@@ -286,17 +287,21 @@ def _pictures(seq, pictures: dict, folder: Path, overwrite: bool) -> tuple[list[
         power = pic["heatmap"][..., 0].max(axis=0)                       # (az, range)
         title = f"{radar} range–azimuth, frame {pic['frame']} (max over elevation)"
         fig = Figure(figsize=(13, 5.5), dpi=100, layout="constrained")
-        ax1, ax2 = fig.subplots(1, 2)
+        ax1, ax2 = fig.subplots(1, 2, width_ratios=(2, 1))
         plot_range_azimuth(power, cfg.range_bins, cfg.azimuth_bins, mode="polar", ax=ax1,
                            title=title)
         t, p = pic["truth"], pic["points"]
         ax2.scatter(t[:, 1], t[:, 0], s=2, c="0.7", label="truth scatterers seen")
         sc = ax2.scatter(p[:, 1], p[:, 0], s=10, c=p[:, 4], cmap="coolwarm",
                          label="detections (colour: range rate)")
-        fig.colorbar(sc, ax=ax2, label="range rate [m/s] (+ receding)")
-        ax2.set_xlim(8, -8)
-        ax2.set_ylim(0, 10)
+        # limits of what is drawn (a corridor is a narrow strip), and a colour bar as tall as
+        # the equal-aspect panel
+        both = np.vstack([t[:, :2], p[:, :2]]) if len(p) else t[:, :2]
+        if len(both):
+            ax2.set_xlim(both[:, 1].max() + 0.5, both[:, 1].min() - 0.5)
+            ax2.set_ylim(0, both[:, 0].max() + 0.5)
         ax2.set_aspect("equal")
+        colorbar_beside(fig, sc, ax2, "range rate [m/s] (+ receding)")
         ax2.set_xlabel("y [m] (left +)")
         ax2.set_ylabel("x [m] (boresight)")
         ax2.set_title(f"{radar} detections vs truth, radar frame", fontsize="medium")

@@ -24,7 +24,8 @@ except ImportError as exc:  # pragma: no cover - depends on the environment
     raise MissingDependencyError("coloradar.viz needs matplotlib: pip install 'coloradar[viz]'"
                                  ) from exc
 
-__all__ = ["cell_edges", "check_image_path", "new_figure", "save_figure", "to_db"]
+__all__ = ["cell_edges", "check_image_path", "colorbar_beside", "new_figure", "save_figure",
+           "to_db"]
 
 
 def check_image_path(path: str | os.PathLike[str], overwrite: bool = False) -> Path:
@@ -48,6 +49,18 @@ def check_image_path(path: str | os.PathLike[str], overwrite: bool = False) -> P
     return new_output_path(path, overwrite)
 
 matplotlib.rcParams.setdefault("figure.max_open_warning", 0)
+
+
+def colorbar_beside(fig: Figure, mappable, ax, label: str):
+    """A colour bar beside ``ax``, exactly as tall as the axes are drawn.
+
+    ``fig.colorbar(…, ax=ax)`` sizes the bar to the axes' layout slot; an equal-aspect axes (a
+    bird's-eye view, a trajectory) is drawn smaller than its slot, and the bar then stands
+    twice the plot's height. An inset axes follows the drawn box (and constrained layout makes
+    room for it).
+    """
+    cax = ax.inset_axes((1.03, 0.0, 0.035, 1.0))
+    return fig.colorbar(mappable, cax=cax, label=label)
 
 
 def new_figure(width: float = 8.0, height: float = 6.0, dpi: int = 100, *,

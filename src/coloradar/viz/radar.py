@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 
 from ..calib import HeatmapConfig
 from ..errors import FrameIndexError, SettingsError
-from ._figure import cell_edges, new_figure, to_db
+from ._figure import cell_edges, colorbar_beside, new_figure, to_db
 
 __all__ = [
     "HeatmapView",
@@ -149,10 +149,15 @@ def plot_range_azimuth(power: np.ndarray, range_bins: np.ndarray, azimuth_bins: 
         keep = r <= max_range
         p, r = p[:, keep], r[keep]
     img = (to_db(p) if db else p.astype(np.float32)).T                 # (range, azimuth)
-    fig, ax = _target_axes(None, ax, size)
-    vmin, vmax = _levels(img, dynamic_range if db else None)
     r_edges = np.maximum(cell_edges(r), 0.0)
     a_edges = np.clip(cell_edges(az), -np.pi / 2, np.pi / 2)
+    if mode == "bev" and ax is None:
+        # A figure of the fan's own shape (width across y over height along x), so that the
+        # equal-aspect fan fills it instead of floating in white space.
+        span = r_edges[-1] * (np.sin(a_edges.max()) - np.sin(a_edges.min()))
+        size = (size[0], min(size[1], 0.8 * size[0] * r_edges[-1] / max(span, 1e-9) + 1.4))
+    fig, ax = _target_axes(None, ax, size)
+    vmin, vmax = _levels(img, dynamic_range if db else None)
     if mode == "polar":
         mesh = ax.pcolormesh(np.degrees(a_edges), r_edges, img, vmin=vmin, vmax=vmax,
                              cmap="viridis", shading="flat")
@@ -171,7 +176,7 @@ def plot_range_azimuth(power: np.ndarray, range_bins: np.ndarray, azimuth_bins: 
     else:
         raise SettingsError(f"mode must be 'bev' or 'polar', got {mode!r}")
     ax.set_title(title or "range–azimuth", fontsize="medium")
-    fig.colorbar(mesh, ax=ax, label="power [dB]" if db else "power")
+    colorbar_beside(fig, mesh, ax, "power [dB]" if db else "power")
     return fig
 
 
