@@ -10,7 +10,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from ..errors import ColoradarError, WriteError
-from ..formats.atomic import new_output_path
+from ..formats.atomic import check_writable, new_output_path
 from ..formats.layout import LAYOUTS, PROCESS_PRODUCTS
 from ..formats.source import check_input_path
 
@@ -24,14 +24,18 @@ class UsageError(ColoradarError):
 # callers and command-line users alike; on the command line only the option means anything.
 _BOTH_SPELLINGS = re.compile(r"\b[A-Za-z_]\w*=(?:True|'[^']*'|\S+?) \((--[A-Za-z][\w-]*"
                              r"(?: [^)]+)?)\)")
+# The same said the other way round, ``pass --overwrite (overwrite=True)`` (the capture importer).
+_OPTION_FIRST = re.compile(r"(--[A-Za-z][\w-]*) \([A-Za-z_]\w*=(?:True|'[^']*'|[^)\s]+)\)")
 _ORIENTATION_STYLE = re.compile(r"\b[A-Za-z_]\w* '([^']*)' \((--[\w-]+ \1)\)")
 
 
 def cli_wording(message: str) -> str:
     """``message`` as the command line says it: ``pass overwrite=True (--overwrite)`` becomes
-    ``pass --overwrite``, ``use orientation 'groundtruth' (--orientation groundtruth)``
+    ``pass --overwrite`` (as does ``pass --overwrite (overwrite=True)``), ``use orientation
+    'groundtruth' (--orientation groundtruth)``
     becomes ``use --orientation groundtruth``."""
-    return _ORIENTATION_STYLE.sub(r"\2", _BOTH_SPELLINGS.sub(r"\1", message))
+    message = _OPTION_FIRST.sub(r"\1", _BOTH_SPELLINGS.sub(r"\1", message))
+    return _ORIENTATION_STYLE.sub(r"\2", message)
 
 
 def add_run_out_radar_args(c: argparse.ArgumentParser, file: str) -> None:
@@ -74,11 +78,60 @@ def positive_int(text: str) -> int:
     return _number(text, int, lambda v: v >= 1, "a whole number ≥ 1")
 
 
+def finite_float(text: str) -> float:
+    """An option's value that may be any finite number (an offset of either sign)."""
+    return _number(text, float, lambda v: abs(v) < float("inf"), "a finite number")
+
+
+def non_negative_int(text: str) -> int:
+    """An option's value that must be a whole number ≥ 0 (a random seed)."""
+    return _number(text, int, lambda v: v >= 0, "a whole number ≥ 0")
+
+
+def float_in(low: float, high: float, *, low_open: bool = False, high_open: bool = False):
+    """The ``type=`` of an option whose value must lie in ``[low, high]`` (``(`` / ``)`` with
+    ``low_open`` / ``high_open``): the bounds the library would refuse after the work, said
+    by the parser, naming the option, before any."""
+    lo, hi = "(" if low_open else "[", ")" if high_open else "]"
+
+    def test(v: float) -> bool:
+        return (low < v if low_open else low <= v) and (v < high if high_open else v <= high)
+
+    def parse(text: str) -> float:
+        return _number(text, float, test, f"a number in {lo}{low:g}, {high:g}{hi}")
+
+    parse.__name__ = f"float_in_{low:g}_{high:g}"
+    return parse
+
+
+def int_in(low: int, high: int | None = None):
+    """The ``type=`` of an option whose value must be a whole number ``≥ low`` (and
+    ``≤ high`` when given)."""
+    def parse(text: str) -> int:
+        if high is None:
+            return _number(text, int, lambda v: v >= low, f"a whole number ≥ {low}")
+        return _number(text, int, lambda v: low <= v <= high,
+                       f"a whole number in [{low}, {high}]")
+
+    parse.__name__ = f"int_in_{low}_{high}"
+    return parse
+
+
+# An image's memory grows as the square of its dots per inch: 1200 (print quality) is about
+# 100 MB per picture; 1e9 failed only after the work, out of memory.
+dpi = int_in(1, 1200)
+
+
+# A local pool of more processes than this is no pool a machine runs (each one a Python with
+# numpy); 1e9 would fail only when the pool starts them.
+jobs_count = int_in(1, 1024)
+
+
 def add_executor_args(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     """The "where the work runs" options of the batch commands: ``--jobs`` (local pool) or
     ``--scheduler`` / ``--scheduler-file`` (Dask). Returns the group, for more options."""
     g = p.add_argument_group("where the work runs")
-    g.add_argument("--jobs", "-j", type=positive_int, metavar="N",
+    g.add_argument("--jobs", "-j", type=jobs_count, metavar="N",
                    help=f"local worker processes (default: all cores, {os.cpu_count()} here; "
                         "1: in this process)")
     g.add_argument("--scheduler", metavar="ADDRESS",
@@ -151,7 +204,8 @@ def _protected(inputs: Iterable[str | os.PathLike[str] | None]) -> list[tuple[Pa
 
 
 def check_output_outside_dataset(out: str | os.PathLike[str],
-                                 inputs: Iterable[str | os.PathLike[str] | None] = ()) -> Path:
+                                 inputs: Iterable[str | os.PathLike[str] | None] = (), *,
+                                 writable: bool = True) -> Path:
     """The one rule of every command that writes: never into the dataset.
 
     ``out`` (a file or folder about to be written) may not be, or lie inside, one of
@@ -159,8 +213,10 @@ def check_output_outside_dataset(out: str | os.PathLike[str],
     calib folder beside an input run, or any run folder at all (a folder holding a run's
     sensor folders: ``lidar/``, ``imu/``, ``groundtruth/``, ``<radar>/adc_samples/``...); nor
     be the dataset root that holds an input run (a folder inside that root, such as
-    ``root/processed``, is allowed). Call it after checking the inputs and before anything is
-    read or written.
+    ``root/processed``, is allowed). Then (``writable``) that something can be created where
+    ``out`` goes (:func:`~coloradar.formats.atomic.check_writable`), so that a read-only
+    output is refused before the work, not after it. Call it after checking the inputs and
+    before anything is read or written.
 
     Parameters
     ----------
@@ -168,6 +224,9 @@ def check_output_outside_dataset(out: str | os.PathLike[str],
         The output path, as given.
     inputs
         The input paths of the command, as given.
+    writable
+        Also check that ``out`` can be written (False: for a folder only read, or a check
+        that the caller makes later itself).
 
     Returns
     -------
@@ -177,8 +236,8 @@ def check_output_outside_dataset(out: str | os.PathLike[str],
     Raises
     ------
     WriteError
-        ``out`` is an input (arguments swapped) or lies inside one or inside a run; never a
-        suggestion to ``--overwrite`` it.
+        ``out`` is an input (arguments swapped) or lies inside one or inside a run (never a
+        suggestion to ``--overwrite`` it); or nothing can be written there.
     """
     path = Path(out)
     target = path.resolve()
@@ -198,6 +257,8 @@ def check_output_outside_dataset(out: str | os.PathLike[str],
                                  "see --help)")
             raise WriteError(f"{path}: lies inside the ColoRadar run {folder}; coloradar never "
                              "writes into a dataset: choose an output outside it")
+    if writable:
+        check_writable(path)
     return path
 
 
@@ -236,10 +297,19 @@ def is_run_folder_path(path: str | os.PathLike[str]) -> bool:
 
 
 def processing_setting(text: str) -> tuple[str, object]:
-    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`
-    (which answers an unknown name with the closest known ones)."""
+    """``--set NAME=VALUE``, parsed by :meth:`coloradar.dsp.ProcessingSettings.parse_setting`;
+    an unknown name is answered with the closest known ones only (not all ~40 of them)."""
+    from dataclasses import fields
+
     from ..dsp import ProcessingSettings  # dsp is heavy: only for the commands that parse it
 
+    name, sep, _ = text.partition("=")
+    names = [f.name for f in fields(ProcessingSettings) if f.name != "workers"]
+    if not sep or name.strip() not in names:
+        hint = did_you_mean(name.strip(), names) if sep else ""
+        what = f"unknown setting {name.strip()!r}" if sep else f"expected NAME=VALUE, got {text!r}"
+        raise argparse.ArgumentTypeError(f"{what}{'; ' + hint if hint else ' '}(the names: "
+                                         "coloradar.dsp.ProcessingSettings, docs/dsp.md)")
     try:
         return ProcessingSettings.parse_setting(text)
     except ValueError as exc:

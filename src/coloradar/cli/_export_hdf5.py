@@ -6,26 +6,41 @@ from __future__ import annotations
 import argparse
 
 from ..progress import Progress
+from ._common import did_you_mean, positive_float, positive_int
 
 HDF5 = "hdf5"
+
+
+def _products(text: str) -> tuple[str, ...]:
+    """``--products``: comma-separated names of :data:`coloradar.learning.samples.PRODUCTS`
+    (checked by the parser, so that a misspelt one is a usage error before any work)."""
+    from ..learning.samples import PRODUCTS
+
+    prods = tuple(p.strip() for p in text.split(",") if p.strip())
+    for p in prods or ("",):
+        if p not in PRODUCTS:
+            raise argparse.ArgumentTypeError(f"unknown product {p!r}; {did_you_mean(p, PRODUCTS)}"
+                                             f"(products: {', '.join(PRODUCTS)})")
+    return prods
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("hdf5 (learning data; needs h5py: pip install 'coloradar[hdf5]')")
     g.add_argument("--radar", choices=("cascade", "single_chip"), default="cascade",
                    help="radar whose frames are the samples (default cascade)")
-    g.add_argument("--products", default="heatmap,bev",
+    g.add_argument("--products", type=_products, default=("heatmap", "bev"),
                    help="comma-separated radar products: heatmap, points, polar, bev "
                         "(default heatmap,bev)")
     g.add_argument("--lidar-scans", action="store_true",
                    help="also store the nearest raw lidar scan of every sample (1 MiB each)")
     g.add_argument("--no-targets", action="store_true",
                    help="no lidar targets (the lidar map cut to each radar frame's view)")
-    g.add_argument("--cell", type=float, default=0.1, help="BEV cell in m (default 0.1)")
+    g.add_argument("--cell", type=positive_float, default=0.1, help="BEV cell in m (default 0.1)")
     g.add_argument("--reduce", choices=("max", "mean"), default="max",
                    help="elevation reduction of the images (default max)")
-    g.add_argument("--voxel-size", type=float, default=0.1, help="lidar map voxel in m (default 0.1)")
-    g.add_argument("--min-hits", type=int, default=1,
+    g.add_argument("--voxel-size", type=positive_float, default=0.1,
+                   help="lidar map voxel in m (default 0.1)")
+    g.add_argument("--min-hits", type=positive_int, default=1,
                    help="lidar scans that must hit a map voxel (default 1)")
     g.add_argument("--compression", choices=("gzip", "lzf", "none"), default="gzip",
                    help="dataset compression (default gzip, level 1 with byte shuffle: every "
@@ -37,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from ..interop.hdf5 import export_hdf5
     from ..learning import BevGrid, TargetSettings, ViewOptions
 
-    products = tuple(p.strip() for p in args.products.split(",") if p.strip())
+    products = args.products
     seq = open_sequence(args.run, calib=args.calib)
     grid = BevGrid.for_radar(seq.radar(args.radar).heatmap_config, cell=args.cell)
     prog = Progress(0, f"{seq.name} -> hdf5", unit="frames", enabled=not args.quiet)

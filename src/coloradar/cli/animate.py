@@ -12,10 +12,11 @@ from ._common import (
     add_file_output_args,
     add_quiet_arg,
     check_input,
+    dpi,
+    float_in,
     new_output_file,
     non_negative_float,
     positive_float,
-    positive_int,
 )
 
 
@@ -32,12 +33,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", type=non_negative_float, default=0.0,
                    help="seconds after the run's start (its first ground-truth pose)")
     p.add_argument("--duration", type=positive_float, help="seconds to render (default: to the end)")
-    p.add_argument("--fps", type=positive_float, default=10.0, help="pictures per second (default 10)")
+    p.add_argument("--fps", type=float_in(0, 120, low_open=True), default=10.0,
+                   help="pictures per second (at most 120; default 10)")
     p.add_argument("--coords", default="base",
                    help="frame: base (default), world, or a sensor name (e.g. cascade)")
     p.add_argument("--view", default="bev", choices=("bev", "3d"), help="bird's-eye or 3-D")
     p.add_argument("--extent", type=positive_float, default=20.0, help="half-width of the view [m]")
-    p.add_argument("--dpi", type=positive_int, default=100, help="resolution (default 100: 800x720 px)")
+    p.add_argument("--dpi", type=dpi, default=100, help="resolution (default 100: 800x720 px)")
     add_file_output_args(p)
     add_quiet_arg(p)
     p.set_defaults(func=run)

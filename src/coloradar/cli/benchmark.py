@@ -9,7 +9,13 @@ import sys
 
 from ..errors import ColoradarError
 from ..odometry.metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
-from ._common import add_executor_args, check_output_outside_dataset, executor_from_args
+from ._common import (
+    add_executor_args,
+    check_output_outside_dataset,
+    executor_from_args,
+    non_negative_int,
+    positive_float,
+)
 
 
 def _named(text: str) -> tuple[str | None, str]:
@@ -76,7 +82,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="point-cloud source (default: the run's best)")
     o.add_argument("--orientation", choices=("imu", "groundtruth"), default=None,
                    help="attitude of the dead-reckoning estimator (default imu)")
-    o.add_argument("--seed", type=int, default=None, help="RANSAC seed (default 0)")
+    o.add_argument("--seed", type=non_negative_int, default=None, help="RANSAC seed (default 0)")
     o.add_argument("--set", dest="settings", type=_setting, action="append", default=[],
                    metavar="NAME=VALUE",
                    help="any other keyword of coloradar.odometry.run_odometry, e.g. --set "
@@ -85,10 +91,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     e = p.add_argument_group("evaluation")
     e.add_argument("--align", choices=ALIGNMENTS, default="se3",
                    help="alignment before the ATE (default se3: Umeyama)")
-    e.add_argument("--drift-lengths", type=float, nargs="+", default=list(DRIFT_LENGTHS),
+    e.add_argument("--drift-lengths", type=positive_float, nargs="+", default=list(DRIFT_LENGTHS),
                    metavar="M", help=f"segment lengths of the drift in metres (default "
                    f"{lengths})")
-    e.add_argument("--distances", type=float, nargs="+", default=[1.0, 2.0, 5.0], metavar="M",
+    e.add_argument("--distances", type=positive_float, nargs="+", default=[1.0, 2.0, 5.0], metavar="M",
                    help="RPE lengths reported per run in the JSON (default 1 2 5)")
     e.add_argument("--rpe-pairing", choices=RPE_PAIRINGS, default="every_pose",
                    help="pairs of those RPEs (default every_pose; evo: evo_rpe's)")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._common import float_in, non_negative_int
+
 __all__ = ["DEFAULT_OUT", "register", "run"]
 
 DEFAULT_OUT = "coloradar_demo"
@@ -21,8 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="output folder (default ./coloradar_demo, where a later demo replaces "
                         "the previous one's output)")
     p.add_argument("--scene", default="corridor", help="built-in scene (default corridor)")
-    p.add_argument("--duration", type=float, default=3.0, help="seconds to simulate (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--duration", type=float_in(0, 3600, low_open=True), default=3.0,
+                   help="seconds to simulate (at most 3600; default 3)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the outputs of a previous demo in OUT")
     p.add_argument("--no-pictures", action="store_true", help="skip the pictures")

@@ -10,7 +10,7 @@ from pathlib import Path
 from ..errors import ColoradarError, DataWarning
 from ..odometry import evaluate_odometry, format_evaluation, write_evaluation
 from ..odometry.metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
-from ._common import UsageError, check_input, check_output_outside_dataset
+from ._common import UsageError, check_input, check_output_outside_dataset, positive_float
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,12 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calib", help="calib folder or calib.zip (default: the odometry's)")
     p.add_argument("--align", choices=ALIGNMENTS, default="se3",
                    help="trajectory alignment before the ATE (default se3: Umeyama)")
-    p.add_argument("--distances", type=float, nargs="+", default=[1.0, 2.0, 5.0],
+    p.add_argument("--distances", type=positive_float, nargs="+", default=[1.0, 2.0, 5.0],
                    metavar="M", help="RPE segment lengths in metres (default 1 2 5)")
     p.add_argument("--rpe-pairing", choices=RPE_PAIRINGS, default="every_pose",
                    help="RPE pose pairs: every_pose (default: a pair from every pose), evo "
                         "(evo_rpe -u m: consecutive segments) or evo_all_pairs (--all_pairs)")
-    p.add_argument("--drift-lengths", type=float, nargs="+", default=list(DRIFT_LENGTHS),
+    p.add_argument("--drift-lengths", type=positive_float, nargs="+", default=list(DRIFT_LENGTHS),
                    metavar="M", help="segment lengths of the KITTI-style drift in metres "
                    f"(default {' '.join(f'{x:g}' for x in DRIFT_LENGTHS)})")
     p.add_argument("--no-plot", action="store_true", help="do not write evaluation.png")

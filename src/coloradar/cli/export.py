@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from ..dataset import open_sequence
+from ..errors import ColoradarError
 from ..interop.bag_export import GROUNDTRUTH_MSGS, RADAR_POINT_SOURCES, export_bag
 from ..interop.ros_messages import DEFAULT_TOPICS, ROS_FORMATS
 from ..progress import Progress
@@ -18,6 +19,7 @@ from ._common import (
     check_input,
     check_output_outside_dataset,
     did_you_mean,
+    is_run_folder_path,
     new_output_file,
     processing_setting,
 )
@@ -96,8 +98,20 @@ def output_format(out: str, fmt: str | None) -> str:
     return fmt
 
 
+def _check_run(args: argparse.Namespace) -> None:
+    """RUN as an input; when it is no run but OUT is one (``export RUN.bag RUN``), the error
+    also asks whether the arguments are swapped, as ``process`` and ``score`` do."""
+    try:
+        check_input(args.run)
+    except ColoradarError as exc:
+        out = Path(args.out)
+        if is_run_folder_path(out) or (out.is_file() and out.suffix.lower() == ".zip"):
+            exc.args = (f"{exc} (are the arguments swapped? RUN comes first, then OUT)",)
+        raise
+
+
 def run(args: argparse.Namespace) -> int:
-    check_input(args.run)  # inputs first: swapped arguments are said as such
+    _check_run(args)  # inputs first: swapped arguments are said as such
     check_output_outside_dataset(args.out, (args.run, args.calib))
     args.format = output_format(args.out, args.format)
     new_output_file(args.out, args.overwrite)

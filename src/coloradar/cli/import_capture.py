@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..capture import import_capture
 from ..capture.importer import MARKER
-from ._common import check_output_outside_dataset
+from ._common import check_output_outside_dataset, non_negative_float
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "MMWCAS JSON")
     p.add_argument("--board", help="AWR1843BOOST, IWR6843ISK, MMWCAS-RF-EVM, or an "
                                    "antenna_cfg.txt of your board (default: from the config)")
-    p.add_argument("--start-time", type=float, metavar="T",
+    p.add_argument("--start-time", type=non_negative_float, metavar="T",
                    help="Unix time of the first frame [s] (default: the TDA2's timestamps "
                         "when they are Unix times, else 0)")
     p.add_argument("--iq-order", choices=("iq", "qi"), help="override the config's I/Q order")

@@ -18,8 +18,17 @@ from ._common import UsageError, cli_wording, did_you_mean
 __all__ = ["build_parser", "main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with coloradar's one form of a usage error: one line naming the option
+    as typed, ``coloradar: error: argument --stride: expected ... (see: coloradar odometry
+    --help)``, exit 2; not the whole usage block (sub-commands inherit the class)."""
+
+    def error(self, message: str):
+        self.exit(2, f"coloradar: error: {message} (see: {self.prog} --help)\n")
+
+
 def _new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="coloradar",
         description="Read, process, simulate and evaluate ColoRadar radar data.")
     parser.add_argument("--version", action="version", version=f"coloradar {__version__}")

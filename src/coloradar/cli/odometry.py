@@ -8,7 +8,6 @@ import sys
 from dataclasses import replace
 
 from ..dataset import open_sequence
-from ..errors import SettingsError
 from ..odometry import (
     ESTIMATORS,
     ORIENTATION_SOURCES,
@@ -19,7 +18,15 @@ from ..odometry import (
 )
 from ..odometry.rio import UPDATES, RioConfig
 from ..progress import Progress
-from ._common import check_output_outside_dataset
+from ._common import (
+    check_output_outside_dataset,
+    float_in,
+    int_in,
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,25 +59,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="filter: use the --radar radar only")
     p.add_argument("--no-time-offset", action="store_true",
                    help="filter: do not estimate the radar-IMU time offset")
-    p.add_argument("--time-offset", type=float, default=0.0, metavar="S",
+    p.add_argument("--time-offset", type=float_in(-1.0, 1.0), default=0.0, metavar="S",
                    help="filter: initial radar-IMU time offset t_d [s] (a frame stamped t "
-                        "shows the motion at IMU time t + t_d; default 0)")
+                        "shows the motion at IMU time t + t_d; within ±1 s; default 0)")
     p.add_argument("--no-extrinsic-rotation", action="store_true",
                    help="filter: take the radar's extrinsic rotation as exact (default: "
                         "refine it online, the calibration's as prior)")
     p.add_argument("--extrinsic-rotation-axes", choices=("all", "yaw"), default="all",
                    help="filter: refine the extrinsic's roll, pitch and yaw for a radar that "
                         "measures v_z (default), or its yaw alone")
-    p.add_argument("--imu-noise-scale", type=float, default=1.0, metavar="K",
+    p.add_argument("--imu-noise-scale", type=positive_float, default=1.0, metavar="K",
                    help="filter: multiply the IMU noise densities and bias walks of the "
                         "3DM-GX5-25 datasheet by K (default 1)")
     p.add_argument("--orientation", choices=ORIENTATION_SOURCES, default="imu",
                    help="dead reckoning: attitude from the IMU gyro (default) or from the "
                         "ground truth (an upper bound)")
-    p.add_argument("--threshold", type=float,
+    p.add_argument("--threshold", type=positive_float,
                    help="inlier threshold on range-rate residuals [m/s] (default from the "
                         "radar's Doppler resolution)")
-    p.add_argument("--min-inliers", type=int, help="fewest static points per frame (default 6)")
+    p.add_argument("--min-inliers", type=int_in(3),
+                   help="fewest static points per frame (at least 3; default 6)")
     p.add_argument("--model", choices=("auto", "3d", "planar"), default="auto",
                    help="estimate vx vy vz (3d) or vx vy with vz = 0 (planar); auto: planar for "
                         "a radar with fewer than 3 elevation rows (the single chip); for the "
@@ -79,13 +87,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="filter: every Doppler point a measurement, gated point by point "
                         "(doppler, default) or one RANSAC ego-velocity per frame "
                         "(ego-velocity, loosely coupled)")
-    p.add_argument("--gyro-bias-window", type=float, metavar="S",
+    p.add_argument("--gyro-bias-window", type=positive_float, metavar="S",
                    help="dead reckoning: the rig is at rest for the first S seconds of the IMU "
                         "stream: subtract their mean rate as gyro bias")
-    p.add_argument("--start", type=float, help="seconds after the first radar frame")
-    p.add_argument("--duration", type=float, help="seconds to process (default: to the end)")
-    p.add_argument("--stride", type=int, default=1, help="use every N-th frame (default 1)")
-    p.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
+    p.add_argument("--start", type=non_negative_float, help="seconds after the first radar frame")
+    p.add_argument("--duration", type=positive_float, help="seconds to process (default: to the end)")
+    p.add_argument("--stride", type=positive_int, default=1, help="use every N-th frame (default 1)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="RANSAC seed (default 0)")
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")
     p.add_argument("--quiet", action="store_true",
@@ -106,8 +114,6 @@ def run(args: argparse.Namespace) -> int:
     cfg = ego_velocity_config(seq.calib.radar(args.radar), **overrides)
     base = RioConfig()
     k = args.imu_noise_scale
-    if not (k > 0 and k < float("inf")):
-        raise SettingsError(f"--imu-noise-scale must be a positive number, got {k}")
     planar = None if args.model == "auto" else args.model == "planar"
     rio = replace(base, estimate_time_offset=not args.no_time_offset,
                   update=args.update, doppler=replace(base.doppler, planar=planar),

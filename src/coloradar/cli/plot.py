@@ -11,8 +11,8 @@ from ._common import (
     add_quiet_arg,
     check_input,
     check_output_outside_dataset,
+    dpi,
     positive_float,
-    positive_int,
 )
 
 
@@ -69,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--slice", default="azimuth-range",
                    choices=("azimuth-range", "elevation-azimuth"), help="heatmap slice")
     p.add_argument("--max-range", type=positive_float, help="clip the range axis [m]")
-    p.add_argument("--dpi", type=positive_int, default=100, help="image resolution (default 100)")
+    p.add_argument("--dpi", type=dpi, default=100, help="image resolution (at most 1200; default 100)")
     add_file_output_args(p)
     add_quiet_arg(p)
     p.set_defaults(func=run)

@@ -32,6 +32,13 @@ def _frames(text: str) -> slice:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected START:STOP (e.g. 0:100 or 50:), got {text!r}") from None
+    # Empty whatever the stream's length: a STOP of 0, or both ends counted from the same end
+    # with STOP not after START (10:5, -2:-5). Said now, not as "nothing to do" with exit 0.
+    reversed_ = (start is not None and stop is not None and (start < 0) == (stop < 0)
+                 and stop <= start)
+    if stop == 0 or reversed_:
+        raise argparse.ArgumentTypeError(f"{text!r} selects no frame (STOP must come after "
+                                         "START, as in Python slices)")
     return slice(start, stop)
 
 

@@ -13,6 +13,7 @@ from ._common import (
     check_input,
     check_output_outside_dataset,
     is_run_folder_path,
+    positive_float,
     positive_int,
 )
 
@@ -32,11 +33,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("run", help="run folder or .zip, or an exported .h5")
     p.add_argument("--radar", choices=("cascade", "single_chip"), default="cascade",
                    help="the radar whose frames are predicted (default cascade)")
-    p.add_argument("--threshold", type=float, default=0.2, help="F-score distance in m (default 0.2)")
-    p.add_argument("--cell", type=float, default=0.1, help="BEV cell in m for the occupancy scores")
-    p.add_argument("--voxel-size", type=float, default=0.1,
+    p.add_argument("--threshold", type=positive_float, default=0.2,
+                   help="F-score distance in m (default 0.2)")
+    p.add_argument("--cell", type=positive_float, default=0.1,
+                   help="BEV cell in m for the occupancy scores")
+    p.add_argument("--voxel-size", type=positive_float, default=0.1,
                    help="lidar map voxel in m (run folders; default 0.1)")
-    p.add_argument("--min-hits", type=int, default=1, help="scans that must hit a map voxel")
+    p.add_argument("--min-hits", type=positive_int, default=1, help="scans that must hit a map voxel")
     p.add_argument("--bin-columns", type=positive_int, default=None,
                    help="float32 values per row of .bin files (default: by the file's kind: 5 "
                         "for radar_pointcloud_<i>.bin, what 'coloradar process' writes; 4 for "

@@ -7,7 +7,17 @@ from pathlib import Path
 
 from ..errors import OutputExistsError
 from ..progress import StageProgress
-from ._common import UsageError, check_output_outside_dataset, positive_float
+from ._common import (
+    UsageError,
+    check_output_outside_dataset,
+    float_in,
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+)
+
+# The simulator's own bounds (coloradar.sim.run), said by the parser before any work.
+MAX_DURATION = 3600.0
 
 __all__ = ["register", "run"]
 
@@ -27,24 +37,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", default="corridor",
                    help=f"built-in scene ({', '.join(SCENES)}) or a scene .json file "
                         "(default: corridor)")
-    p.add_argument("--duration", type=positive_float, default=10.0, help="seconds (default 10)")
+    p.add_argument("--duration", type=float_in(0, MAX_DURATION, low_open=True), default=10.0,
+                   help=f"seconds (at most {MAX_DURATION:g}; default 10)")
     p.add_argument("--laps", type=positive_float, metavar="N",
                    help="instead of --duration: as long as N laps of the scene's closed path "
                         "take (after --rest), so that the rig comes back (loop closures)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0); also the run "
+    p.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0); also the run "
                    "number in the run's name")
     p.add_argument("--motion", choices=list(MOTION_PROFILES), default="smooth",
                    help="rig motion profile (default smooth)")
-    p.add_argument("--speed", type=float, default=None, metavar="M_PER_S",
+    p.add_argument("--speed", type=float_in(0, 30), default=None, metavar="M_PER_S",
                    help="nominal rig speed in m/s (default: the scene's); above 1.76 m/s the "
                         "cascade's Doppler folds")
-    p.add_argument("--rest", type=float, default=0.0, metavar="S",
+    p.add_argument("--rest", type=float_in(0, MAX_DURATION, high_open=True), default=0.0, metavar="S",
                    help="the rig stands still for the first S seconds, then eases into its "
                         "motion (default 0: it moves from the start)")
-    p.add_argument("--imu-noise", type=float, default=1.0, metavar="SCALE",
+    p.add_argument("--imu-noise", type=non_negative_float, default=1.0, metavar="SCALE",
                    help="scale of the IMU's errors (white noise, turn-on bias, bias random "
                         "walk; 1 = the 3DM-GX5-25 datasheet, the default; 0 = an ideal IMU)")
-    p.add_argument("--radar-time-offset", type=float, default=0.0, metavar="S",
+    p.add_argument("--radar-time-offset", type=float_in(-0.5, 0.5), default=0.0, metavar="S",
                    help="radar clock lag t_d [s]: radar frames are stamped t - t_d "
                         "(default 0); recorded in the truth")
     p.add_argument("--sensors", default=",".join(SENSOR_CHOICES),
@@ -89,6 +100,12 @@ def run(args: argparse.Namespace) -> int:
         from ..sim.point_runs import laps_duration
 
         args.duration = laps_duration(args.scene, args.laps, speed=args.speed, rest=args.rest)
+        if args.duration > MAX_DURATION:
+            raise UsageError(f"--laps {args.laps:g}: {args.laps:g} laps of {args.scene!r} take "
+                             f"{args.duration:.0f} s; at most {MAX_DURATION:g} s are simulated")
+    if args.rest >= args.duration:
+        raise UsageError(f"--rest {args.rest:g}: the rig would rest for the whole run "
+                         f"(--duration {args.duration:g}); give a shorter --rest")
     prog = StageProgress("simulate", enabled=not args.quiet)
     try:
         res = simulate_run(args.out, scene=args.scene, duration=args.duration, seed=args.seed,

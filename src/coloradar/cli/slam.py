@@ -9,7 +9,12 @@ from dataclasses import replace
 from ..dataset import open_sequence
 from ..dsp.points import POINT_SOURCES
 from ..geometry.cloud_metrics import format_map_scores
-from ._common import check_input, check_output_outside_dataset, positive_float
+from ._common import (
+    check_input,
+    check_output_outside_dataset,
+    non_negative_int,
+    positive_float,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -49,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--score-map", action="store_true",
                    help="score the map against the lidar map built with ground truth (the run "
                         "needs lidar and ground truth); the scores go to slam.json")
-    p.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="RANSAC seed (default 0)")
     p.add_argument("--calib", help="calib folder or calib.zip (default: found beside the run)")
     p.add_argument("--no-plot", action="store_true", help="do not write slam.png")
     p.add_argument("--overwrite", action="store_true", help="replace existing output files")

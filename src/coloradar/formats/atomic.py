@@ -14,8 +14,8 @@ from typing import BinaryIO
 
 from ..errors import ColoradarError, OutputExistsError, WriteError
 
-__all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_text", "clean_partial_files",
-           "default_file_mode",
+__all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_text", "check_writable",
+           "clean_partial_files", "default_file_mode",
            "is_partial_file", "make_output_dir", "new_output_path", "output_dir_error",
            "scratch_file", "write_text_if_changed"]
 
@@ -91,7 +91,12 @@ def atomic_output(path: str | os.PathLike[str], suffix: str = "") -> Iterator[Pa
         os.replace(tmp, path)
     except BaseException as exc:
         if tmp is not None:
-            tmp.unlink(missing_ok=True)
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:
+                # On a read-only file system the unlink of a name never created fails too;
+                # its error would name the temporary file instead of the user's path.
+                pass
         if isinstance(exc, OSError) and not isinstance(exc, ColoradarError):
             raise _write_error(path, exc) from None
         raise
@@ -104,6 +109,48 @@ def _write_error(path: Path, exc: OSError) -> WriteError:
     else:
         why = str(exc.strerror or exc)
     return WriteError(f"{path}: cannot write ({why})")
+
+
+def check_writable(path: str | os.PathLike[str]) -> Path:
+    """Refuse, before any work, an output ``path`` (a file or a folder) that cannot be written.
+
+    The nearest folder that exists on the way to ``path`` (``path`` itself when it is a
+    folder, its parent when it is a file) is asked to create a file, which is removed at once:
+    a read-only file system, a missing permission or a file where a folder must be are said
+    now, naming ``path``, instead of after the work.
+
+    Parameters
+    ----------
+    path
+        The output file or folder, as given.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path`` as a path.
+
+    Raises
+    ------
+    WriteError
+        Nothing can be created where ``path`` goes.
+    """
+    path = Path(path)
+    near = next((q for q in (path, *path.parents) if q.exists()), Path.cwd())
+    if near != path and not near.is_dir():
+        raise WriteError(f"{path}: cannot write (a folder on its path, {near}, is a file)")
+    folder = near if near.is_dir() else near.parent
+    # A real file made and removed, not os.access: it meets what the write itself would meet
+    # (a read-only mount, root squashed on NFS, ACLs), and access() answers "yes" to root.
+    probe = _temporary_name(folder / path.name, "")
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except OSError as exc:
+        raise _write_error(path, exc) from None
+    try:
+        os.unlink(probe)
+    except OSError:
+        pass  # named as a partial write: readers ignore it, the next writer removes it
+    return path
 
 
 def make_output_dir(path: str | os.PathLike[str]) -> Path:

@@ -26,12 +26,14 @@ import numpy as np
 from ..calib import Extrinsic
 from ..dataset import Sequence
 from ..errors import (
+    ColoradarError,
     DataWarning,
     FormatError,
     MissingDataError,
     OutputExistsError,
     ReadError,
     SettingsError,
+    WriteError,
 )
 from .ros_messages import (
     _TYPES,
@@ -237,9 +239,15 @@ def export_bag(seq: Sequence, out: str | os.PathLike[str], fmt: str = "ros2", *,
     _plan_topics(job, processing)
     order = _time_order(job.plan)
     start = time.perf_counter()
-    bag_path, partial = _partial_bag(job.out, fmt)
-    _write_messages(job, order, bag_path, partial)
-    _finish(job, bag_path, partial)
+    try:
+        bag_path, partial = _partial_bag(job.out, fmt)
+        _write_messages(job, order, bag_path, partial)
+        _finish(job, bag_path, partial)
+    except OSError as exc:
+        if isinstance(exc, ColoradarError):
+            raise
+        # The system names the hidden partial bag it could not make; the user named OUT.
+        raise WriteError(f"{job.out}: cannot write ({exc.strerror or exc})") from None
     job.result.seconds = time.perf_counter() - start
     return job.result
 
