@@ -29,6 +29,49 @@ if TYPE_CHECKING:
 __all__ = ["evaluation_figure", "plot_evaluation"]
 
 
+ELONGATED = 3.0
+"""A top view whose extent along its main direction is over this many times the extent across
+is drawn along/across the path (stretched across), not at equal aspect."""
+
+
+def top_view_frame(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """How to draw the top view of points ``xy`` (float ``(N, 2)`` [m]): the rotation ``R``
+    (2 × 2) and centre ``c`` such that ``(xy − c)·Rᵀ`` is (along the main direction, across
+    it), the path's first point on the low side, and the extents' ratio along/across."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    c = xy.mean(axis=0) if len(xy) else np.zeros(2)
+    if len(xy) < 3:
+        return np.eye(2), c, 1.0
+    _, vec = np.linalg.eigh(np.cov((xy - c).T))
+    major = vec[:, 1]
+    if (xy[0] - c) @ major > 0:                  # the path starts at the low end
+        major = -major
+    rot = np.array([[major[0], major[1]], [-major[1], major[0]]])
+    span = np.ptp((xy - c) @ rot.T, axis=0)
+    return rot, c, float(span[0] / max(span[1], 1e-9))
+
+
+def _top_view(ax, ref: np.ndarray, est: np.ndarray, align: str) -> None:
+    """Ground truth and aligned estimate from above: at equal aspect, or along/across the
+    path where it is long and thin (a hallway at equal aspect is a line in an empty square)."""
+    rot, c, ratio = top_view_frame(ref[:, :2])
+    if ratio > ELONGATED:
+        ref = (ref[:, :2] - c) @ rot.T
+        est = (est[:, :2] - c) @ rot.T
+    ax.plot(ref[:, 0], ref[:, 1], "k-", lw=1.5, label="ground truth")
+    ax.plot(est[:, 0], est[:, 1], "-", color="tab:red", lw=1.0,
+            label=f"estimate ({align} aligned)")
+    ax.plot(ref[:1, 0], ref[:1, 1], "ko", ms=4)
+    if ratio > ELONGATED:
+        ax.set(xlabel="along the path's main direction [m]",
+               ylabel="across it [m] (stretched)",
+               title="trajectory (top view, along / across the path)")
+    else:
+        ax.set(xlabel="x [m]", ylabel="y [m]", title="trajectory (top view)")
+        ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(loc="best", fontsize=8)
+
+
 def evaluation_figure(ev: Evaluation) -> Figure:
     """Four panels: top view of the aligned estimate and the ground truth, ATE over time,
     ego-velocity against ground truth, RPE per distance."""
@@ -38,13 +81,7 @@ def evaluation_figure(ev: Evaluation) -> Figure:
     a = ev.ate
     t0 = ev.reference.timestamps[0]
     ref, est = ev.reference.translations, a.aligned.translations
-    ax[0, 0].plot(ref[:, 0], ref[:, 1], "k-", lw=1.5, label="ground truth")
-    ax[0, 0].plot(est[:, 0], est[:, 1], "-", color="tab:red", lw=1.0,
-                  label=f"estimate ({ev.info.get('align', 'se3')} aligned)")
-    ax[0, 0].plot(ref[:1, 0], ref[:1, 1], "ko", ms=4)
-    ax[0, 0].set(xlabel="x [m]", ylabel="y [m]", title="trajectory (top view)")
-    ax[0, 0].set_aspect("equal", adjustable="datalim")
-    ax[0, 0].legend(loc="best", fontsize=8)
+    _top_view(ax[0, 0], ref, est, ev.info.get("align", "se3"))
 
     ax[0, 1].plot(a.timestamps - t0, a.errors, color="tab:red", lw=1.0)
     ax[0, 1].set(xlabel="time [s]", ylabel="position error [m]",
@@ -73,15 +110,19 @@ def evaluation_figure(ev: Evaluation) -> Figure:
     pct = [r.translation_percent for r in ev.rpe]
     rot = [r.rotation_deg_per_m for r in ev.rpe]
     x = np.arange(len(d))
-    ax[1, 1].bar(x - 0.2, pct, 0.4, color="tab:red", label="translation [%]")
-    ax[1, 1].bar(x + 0.2, rot, 0.4, color="tab:gray", label="rotation [deg/m]")
+    # two units, two axes: on one, the rotation bars (deg/m, ~0.01) vanish beside the %
+    right = ax[1, 1].twinx()
+    b1 = ax[1, 1].bar(x - 0.2, pct, 0.4, color="tab:red", label="translation [%]")
+    b2 = right.bar(x + 0.2, rot, 0.4, color="tab:gray", label="rotation [deg/m]")
     ax[1, 1].set_xticks(x, [f"{v:g} m" for v in d])
-    ax[1, 1].set(xlabel="segment length", title="RPE")
-    ax[1, 1].legend(loc="best", fontsize=8)
+    ax[1, 1].set(xlabel="segment length", ylabel="translation error [%]", title="RPE")
+    right.set_ylabel("rotation error [deg/m]")
+    ax[1, 1].legend(handles=[b1, b2], loc="best", fontsize=8)
     ax[1, 1].grid(alpha=0.3, axis="y")
     name = ev.info.get("run_name", "")
     if name:
-        fig.suptitle(f"{name}: {ev.info.get('radar', '')} radar odometry")
+        what = "SLAM" if ev.info.get("estimator") == "slam" else "odometry"
+        fig.suptitle(f"{name}: {ev.info.get('radar', '')} radar {what}")
     return fig
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import MissingDependencyError
 from ..formats.atomic import atomic_write_bytes
 from ..geometry import Trajectory
+from ..odometry.plot import ELONGATED, top_view_frame
 from .system import SlamResult
 
 try:
@@ -30,11 +31,20 @@ def slam_figure(res: SlamResult, groundtruth: Trajectory | None = None, title: s
     """Top view (x–y, world frame [m]) of the map (grey, darker where more keyframes saw it),
     the odometry (dashed), the optimised trajectory, accepted loops (green) and rejected
     candidates (red), and the ground truth (black) when given."""
-    m = res.map_points
-    xy = np.vstack([res.trajectory.translations[:, :2], m[:, :2]]) if m.shape[0] else \
-        res.trajectory.translations[:, :2]
+    # A long, thin path (a hallway, in any direction) is drawn along / across its main
+    # direction; the figure takes the map's shape (a long corridor is a wide, low picture).
+    rot, c, elongation = top_view_frame(res.trajectory.translations[:, :2])
+    if elongation <= ELONGATED:
+        rot, c = np.eye(2), np.zeros(2)
+
+    def flat(p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p)[:, :2] - c) @ rot.T
+
+    m = res.map_points.copy()
+    m[:, :2] = flat(m) if m.shape[0] else m[:, :2]
+    xy = np.vstack([flat(res.trajectory.translations), m[:, :2]]) if m.shape[0] else \
+        flat(res.trajectory.translations)
     span = np.ptp(xy, axis=0) + 2.0
-    # The figure takes the map's shape (a long corridor is a wide, low picture).
     ratio = span[0] / span[1]
     height = float(np.clip(10.0 / ratio, 3.5, 9.0)) + 1.6
     fig = Figure(figsize=(10.0, height), dpi=110, layout="constrained")
@@ -43,8 +53,8 @@ def slam_figure(res: SlamResult, groundtruth: Trajectory | None = None, title: s
     if m.shape[0]:
         ax.scatter(m[:, 0], m[:, 1], s=2, c=np.minimum(m[:, 3], 10), cmap="Greys", vmin=0,
                    vmax=12, linewidths=0, label=f"radar map ({m.shape[0]:,} voxels)")
-    kp = (np.zeros((0, 3)) if res.keyframe_poses is None
-          else np.asarray(res.keyframe_poses.translations))
+    kp = (np.zeros((0, 2)) if res.keyframe_poses is None
+          else flat(res.keyframe_poses.translations))
     for accepted, colour in ((False, "tab:red"), (True, "tab:green")):
         segs = [(kp[lp.i, :2], kp[lp.j, :2]) for lp in res.loops if lp.accepted == accepted]
         if segs:
@@ -53,17 +63,18 @@ def slam_figure(res: SlamResult, groundtruth: Trajectory | None = None, title: s
                                              label=f"{'accepted' if accepted else 'rejected'} "
                                                    f"loops ({len(segs)})"))
     if groundtruth is not None:
-        g = groundtruth.translations
+        g = flat(groundtruth.translations)
         ax.plot(g[:, 0], g[:, 1], color="black", lw=1.0, label="ground truth")
-    o, t = res.odometry.translations, res.trajectory.translations
+    o, t = flat(res.odometry.translations), flat(res.trajectory.translations)
     ax.plot(o[:, 0], o[:, 1], color="tab:orange", lw=1.0, ls="--", label="odometry (before)")
     ax.plot(t[:, 0], t[:, 1], color="tab:blue", lw=1.2, label="SLAM (after)")
-    ax.set_xlabel("x [m]")
-    if ratio <= 3.0:
+    along = elongation > ELONGATED
+    ax.set_xlabel("along the path's main direction [m]" if along else "x [m]")
+    if ratio <= ELONGATED:
         ax.set_aspect("equal", adjustable="box")
-        ax.set_ylabel("y [m]")
-    else:  # a long corridor: y stretched so that the loops can be seen
-        ax.set_ylabel("y [m] (stretched)")
+        ax.set_ylabel("across it [m]" if along else "y [m]")
+    else:  # a long corridor: stretched across so that the loops can be seen
+        ax.set_ylabel("across it [m] (stretched)" if along else "y [m] (stretched)")
     ax.set_title(title or "radar SLAM", fontsize=10)
     fig.legend(loc="outside lower center", ncol=3, fontsize=8)
     return fig
