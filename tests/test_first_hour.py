@@ -433,3 +433,38 @@ def test_paths_outside_the_repository_are_explained():
     for folder in sorted(named):
         top = "/".join(folder.split("/")[:2])
         assert f"../shared/{top}" in section, folder
+
+
+# --------------------------------------------------------------------- issue 41, item 6
+@pytest.fixture(scope="module")
+def one_radar_runs(tmp_path_factory):
+    from coloradar.sim.run import simulate_run
+
+    out = tmp_path_factory.mktemp("one_radar")
+    runs = {}
+    for radar, seed in (("cascade", 1), ("single_chip", 2)):
+        res = simulate_run(out / radar, scene="corridor", duration=8.0, seed=seed, rest=1.0,
+                           sensors=[radar, "imu", "groundtruth"], heatmaps=False)
+        runs[radar] = res.run_path
+    return runs
+
+
+def test_slam_and_odometry_take_the_only_radar_a_run_has(one_radar_runs, tmp_path, capsys):
+    """slam defaults to the single chip and odometry to the cascade: on a run with the other
+    radar alone they used to fail ("the single_chip radar has no point clouds…"); they take
+    the radar the run has and say so."""
+    pytest.importorskip("gtsam")
+    assert main(["slam", str(one_radar_runs["cascade"]), "--out", str(tmp_path / "s"),
+                 "--no-plot"]) == 0
+    err = capsys.readouterr().err
+    assert "cascade radar only" in err and "--radar cascade" in err
+    assert json.loads((tmp_path / "s" / "odometry.json").read_text())["radar"] == "cascade"
+    assert main(["odometry", str(one_radar_runs["single_chip"]), "--out",
+                 str(tmp_path / "o")]) == 0
+    assert "single_chip radar only" in capsys.readouterr().err
+
+
+def test_a_radar_without_data_names_the_one_the_run_has(one_radar_runs, tmp_path, capsys):
+    assert main(["odometry", str(one_radar_runs["single_chip"]), "--radar", "cascade",
+                 "--out", str(tmp_path / "o")]) == 1
+    assert "pass --radar single_chip" in capsys.readouterr().err

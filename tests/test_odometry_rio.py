@@ -493,3 +493,23 @@ def test_a_yawed_radar_mount_is_mostly_taken_up(axes):
 def test_extrinsic_rotation_axes_are_checked():
     with pytest.raises(Exception, match="extrinsic_rotation_axes"):
         RioConfig(extrinsic_rotation_axes="pitch")
+
+
+@pytest.mark.parametrize(("outside", "warned"), [(1, False), (2, False), (12, True)])
+def test_frames_beyond_the_imu_span_are_warned_about_only_beyond_a_handful(outside, warned):
+    """Issue 41, item 7: a radar frame or two beyond the IMU's span is normal (every simulated
+    run had one and warned); more than EDGE_FRAMES are worth a warning."""
+    from coloradar.errors import DataWarning
+    from coloradar.odometry.rio import EDGE_FRAMES
+
+    imu_t, data, track, *_ = _synthetic(12.0, 4)
+    # cut the IMU so that `outside` radar frames lie after its last sample
+    stamps = np.asarray(track.timestamps)
+    last = stamps[-outside - 1] + 0.5 * (stamps[-outside] - stamps[-outside - 1])
+    keep = imu_t <= last
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rio_odometry(track, PRESET, imu_t[keep], data[keep])
+    said = [w for w in caught if issubclass(w.category, DataWarning)
+            and "outside the IMU's time span" in str(w.message)]
+    assert bool(said) == warned and (outside > EDGE_FRAMES) == warned, [str(w.message) for w in said]

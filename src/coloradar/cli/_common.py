@@ -6,6 +6,7 @@ import argparse
 import difflib
 import os
 import re
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -314,3 +315,27 @@ def processing_setting(text: str) -> tuple[str, object]:
         return ProcessingSettings.parse_setting(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def pick_radar(seq, given: str | None, default: str, quiet: bool = False) -> str:
+    """The radar a command runs on: ``given`` (``--radar``); else the run's only radar when it
+    has one alone (said on stderr: the default would fail on it), else ``default``."""
+    if given is not None:
+        return given
+    has = [r for r in ("single_chip", "cascade")
+           if any(s.startswith(r + "/") for s in seq.available())]
+    if len(has) == 1 and has[0] != default:
+        if not quiet:
+            print(f"{seq.name}: the run has the {has[0]} radar only: using it (--radar "
+                  f"{has[0]})", file=sys.stderr)
+        return has[0]
+    return default
+
+
+def other_radar_hint(seq, radar: str) -> str:
+    """``"; the run has the cascade: pass --radar cascade"`` when the other radar has data,
+    else ``""``: the end of a message saying ``radar`` lacks what a command needs."""
+    other = "cascade" if radar == "single_chip" else "single_chip"
+    if any(s.startswith(other + "/") for s in seq.available()):
+        return f"; the run has the {other} radar: pass --radar {other}"
+    return ""

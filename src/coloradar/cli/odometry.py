@@ -8,6 +8,7 @@ import sys
 from dataclasses import replace
 
 from ..dataset import open_sequence
+from ..errors import MissingDataError
 from ..odometry import (
     ESTIMATORS,
     ORIENTATION_SOURCES,
@@ -24,6 +25,8 @@ from ._common import (
     int_in,
     non_negative_float,
     non_negative_int,
+    other_radar_hint,
+    pick_radar,
     positive_float,
     positive_int,
 )
@@ -42,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "offset and per-pose covariance). Evaluate with 'coloradar evaluate DIR'.")
     p.add_argument("run", help="run folder or .zip")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--radar", choices=("cascade", "single_chip"), default="cascade",
-                   help="which radar (default cascade)")
+    p.add_argument("--radar", choices=("cascade", "single_chip"),
+                   help="which radar (default: cascade, or the run's only radar)")
     p.add_argument("--source", choices=SOURCES,
                    help="point clouds from: the sensor's own point clouds (single chip), raw "
                         "ADC frames (processed with coloradar.dsp), or heatmaps; default: "
@@ -104,6 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     check_output_outside_dataset(args.out, (args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
+    args.radar = pick_radar(seq, args.radar, "cascade", args.quiet)
     overrides = {}
     if args.threshold is not None:
         overrides["threshold"] = args.threshold
@@ -125,17 +129,23 @@ def run(args: argparse.Namespace) -> int:
                   accel_bias_walk=base.accel_bias_walk * k,
                   gyro_bias_walk=base.gyro_bias_walk * k)
     progress = None if args.quiet else Progress(0, f"{args.radar} frames")
-    res = run_odometry(seq, args.out, radar=args.radar, source=args.source,
-                       orientation=args.orientation, config=cfg, start=args.start,
-                       duration=args.duration, stride=args.stride, seed=args.seed,
-                       gyro_bias_window=args.gyro_bias_window, overwrite=args.overwrite,
-                       progress=progress, estimator=args.estimator, rio_config=rio,
-                       fuse=() if args.no_fuse else
-                       ("auto" if args.fuse is None else tuple(args.fuse)))
+    try:
+        res = run_odometry(seq, args.out, radar=args.radar, source=args.source,
+                           orientation=args.orientation, config=cfg, start=args.start,
+                           duration=args.duration, stride=args.stride, seed=args.seed,
+                           gyro_bias_window=args.gyro_bias_window, overwrite=args.overwrite,
+                           progress=progress, estimator=args.estimator, rio_config=rio,
+                           fuse=() if args.no_fuse else
+                           ("auto" if args.fuse is None else tuple(args.fuse)))
+    except MissingDataError as exc:
+        raise MissingDataError(f"{exc}{other_radar_hint(seq, args.radar)}") from None
     tr, traj = res.track, res.trajectory
     dist = float(path_length(traj.translations)[-1])
+    edge = len(tr) - len(traj) if args.estimator == "rio" else 0
     print(f"{seq.name}: {int(tr.ok.sum())}/{len(tr)} {args.radar} frames with an ego-velocity; "
-          f"trajectory of {len(traj)} poses, {dist:.1f} m travelled", file=sys.stdout)
+          f"trajectory of {len(traj)} poses, {dist:.1f} m travelled"
+          + (f" ({edge} frame{'s' if edge > 1 else ''} at the edges of the IMU's span left out)"
+             if edge > 0 else ""), file=sys.stdout)
     if args.estimator == "rio":
         import json
 

@@ -8,11 +8,14 @@ from dataclasses import replace
 
 from ..dataset import open_sequence
 from ..dsp.points import POINT_SOURCES
+from ..errors import MissingDataError
 from ..geometry.cloud_metrics import format_map_scores
 from ._common import (
     check_input,
     check_output_outside_dataset,
     non_negative_int,
+    other_radar_hint,
+    pick_radar,
     positive_float,
 )
 
@@ -30,8 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "(gtsam, small_gicp).")
     p.add_argument("run", help="run folder or .zip")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--radar", choices=("single_chip", "cascade"), default="single_chip",
-                   help="which radar (default single_chip)")
+    p.add_argument("--radar", choices=("single_chip", "cascade"),
+                   help="which radar (default: single_chip, or the run's only radar)")
     p.add_argument("--source", choices=POINT_SOURCES,
                    help="point clouds from the sensor's own point clouds, ADC frames or "
                         "heatmaps (default: pointclouds when present, else adc, else heatmaps)")
@@ -74,9 +77,13 @@ def run(args: argparse.Namespace) -> int:
     check_input(args.run)
     check_output_outside_dataset(args.out, (args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)
-    out = run_slam(seq, args.out, radar=args.radar, source=args.source, settings=settings,
-                   seed=args.seed, score_against_lidar=args.score_map, plot=not args.no_plot,
-                   overwrite=args.overwrite)
+    args.radar = pick_radar(seq, args.radar, "single_chip", args.quiet)
+    try:
+        out = run_slam(seq, args.out, radar=args.radar, source=args.source, settings=settings,
+                       seed=args.seed, score_against_lidar=args.score_map,
+                       plot=not args.no_plot, overwrite=args.overwrite)
+    except MissingDataError as exc:
+        raise MissingDataError(f"{exc}{other_radar_hint(seq, args.radar)}") from None
     if args.quiet:
         return 0
     s = out.summary

@@ -51,6 +51,10 @@ from .zero_velocity import ZeroVelocityConfig, imu_quiet, static_frames, still_r
 
 __all__ = ["UPDATES", "RioConfig", "RioResult", "rio_odometry", "rio_summary"]
 
+EDGE_FRAMES = 5
+"""Radar frames left out before the first usable one or beyond the IMU's span that go
+unwarned (a frame at each edge of the IMU's span is normal; the summaries count them)."""
+
 UPDATES = ("doppler", "ego-velocity")
 """Radar updates of the filter: every Doppler point a scalar measurement (tightly coupled,
 the default, :mod:`.doppler`) or one RANSAC ego-velocity per frame (loosely coupled)."""
@@ -515,8 +519,8 @@ def _first_frame(s: _Setup) -> tuple[int, np.ndarray, np.ndarray, float]:
             cfg.velocity_noise_floor, gate_sigma, cfg.velocity_noise_scale)
 
     k0 = next((int(k) for k in usable if corroborated(int(k))), int(usable[0]))
-    if k0 > 0 or not inside.all():
-        dropped = int(k0 + (~inside[k0:]).sum())
+    dropped = int(k0 + (~inside[k0:]).sum())
+    if dropped > EDGE_FRAMES:       # a frame or two at the IMU's edges is normal (summary)
         warnings.warn(f"{prim.frame}: {dropped} of {len(prim)} radar frames lie before the "
                       "first usable one or outside the IMU's time span; left out",
                       DataWarning, stacklevel=4)
