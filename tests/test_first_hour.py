@@ -468,3 +468,18 @@ def test_a_radar_without_data_names_the_one_the_run_has(one_radar_runs, tmp_path
     assert main(["odometry", str(one_radar_runs["single_chip"]), "--radar", "cascade",
                  "--out", str(tmp_path / "o")]) == 1
     assert "pass --radar single_chip" in capsys.readouterr().err
+
+
+def test_the_readme_opens_with_the_first_hour():
+    """Issue 41, item 11: the first screen is what a newcomer does first — the two set-up
+    commands with how long they take, then the first-hour path with each step's time — not a
+    paragraph of speed claims."""
+    text = _doc_texts()["README.md"]
+    lines = text.splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("## Your first hour"))
+    first = "\n".join(lines[:start])
+    assert start < 30 and "coloradar demo" in first and "pytest -q" in first
+    assert "about 6 minutes" in first
+    assert text.index("faster than") > text.index("## Your first hour")   # claims come later
+    steps = [ln for ln in lines[start:start + 20] if re.match(r"\| \d\. ", ln)]
+    assert len(steps) >= 6 and all(re.search(r"\d+(\.\d+)? s", ln) for ln in steps), steps
