@@ -339,3 +339,20 @@ def other_radar_hint(seq, radar: str) -> str:
     if any(s.startswith(other + "/") for s in seq.available()):
         return f"; the run has the {other} radar: pass --radar {other}"
     return ""
+
+
+def calibration_run(args: argparse.Namespace):
+    """A ``calibrate`` command's inputs, checked before any work: the output file (refused
+    inside the dataset or when it exists without ``--overwrite``), the run, its radar's
+    calibration and its ADC stream (a :class:`MissingDataError` when it has no frames)."""
+    from ..dataset import open_sequence
+    from ..errors import MissingDataError
+    from ..formats.source import check_input_path
+
+    check_input_path(args.run, "a run folder or a run .zip")
+    out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
+    seq = open_sequence(args.run, calib=args.calib)
+    stream = seq.radar(args.radar).adc
+    if len(stream) == 0:
+        raise MissingDataError(f"{args.run}: no {args.radar} ADC frames")
+    return out, seq, seq.calib.radar(args.radar), stream

@@ -19,14 +19,13 @@ from ..calib import (
 )
 from ..dataset import open_dataset, open_sequence
 from ..errors import DataWarning, MissingDataError
-from ..formats.source import check_input_path
 from ..geometry import rig_velocity, trajectory_from_groundtruth
 from ..progress import Progress
 from ._common import (
     add_file_output_args,
     add_quiet_arg,
     add_run_out_radar_args,
-    new_output_file,
+    calibration_run,
     non_negative_float,
     positive_int,
 )
@@ -98,14 +97,8 @@ def _frames(stream, positions: list[int]):
 def run(args: argparse.Namespace) -> int:
     from ..dsp.coupling_estimate import estimate_coupling  # dsp is heavy: only when run
 
-    check_input_path(args.run, "a run folder or a run .zip")
-    out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
-    seq = open_sequence(args.run, calib=args.calib)
-    rc = seq.calib.radar(args.radar)
-    stream = seq.radar(args.radar).adc
+    out, seq, rc, stream = calibration_run(args)
     n = len(stream)
-    if n == 0:
-        raise MissingDataError(f"{args.run}: no {args.radar} ADC frames")
     moving = np.flatnonzero(moving_frames(seq, args.radar, stream.timestamps, args.min_speed))
     if moving.size == 0:
         raise MissingDataError(f"{seq.name}: the radar moves slower than {args.min_speed:g} m/s "

@@ -9,16 +9,14 @@ import warnings
 import numpy as np
 
 from ..calib import write_phase_frequency_calib
-from ..dataset import open_sequence
 from ..errors import DataWarning, MissingDataError
-from ..formats.source import check_input_path
 from ..geometry import rig_velocity, trajectory_from_groundtruth
 from ..progress import Progress
 from ._common import (
     add_file_output_args,
     add_quiet_arg,
     add_run_out_radar_args,
-    new_output_file,
+    calibration_run,
     positive_float,
     positive_int,
 )
@@ -94,14 +92,8 @@ def run_phase(args: argparse.Namespace) -> int:
         estimation_passes,
     )
 
-    check_input_path(args.run, "a run folder or a run .zip")
-    out = new_output_file(args.out, args.overwrite, inputs=(args.run, args.calib))
-    seq = open_sequence(args.run, calib=args.calib)
-    rc = seq.calib.radar(args.radar)
-    stream = seq.radar(args.radar).adc
+    out, seq, rc, stream = calibration_run(args)
     n = len(stream)
-    if n == 0:
-        raise MissingDataError(f"{args.run}: no {args.radar} ADC frames")
     limit = args.max_speed if args.max_speed is not None else 0.9 * rc.waveform.max_velocity
     vel = radar_velocities(seq, args.radar, stream.timestamps)
     speed = np.linalg.norm(vel, axis=1)
