@@ -285,6 +285,18 @@ def test_alias_confidence_tracks_the_evidence():
 
 
 def test_uncalibrated_disambiguated_heatmaps_keep_folded_cells():
+    """A target at 1.4 v_max: the disambiguated heatmap moves its cells to alias 1 on a matched
+    array, and keeps them folded on the same array without a phase calibration."""
     rc = preset_radar("single_chip")
-    assert RadarProcessor(rc, heatmap_unwrap=True).detector.cell_aliases(
-        np.zeros((3, 4, rc.waveform.num_chirps, 8), dtype=np.complex64)) is None
+    w = rc.waveform
+    u = np.array([np.cos(0.3), np.sin(0.3), 0.0])
+    adc = synthesize_adc(rc, [4.0 * u], [1.4 * w.max_velocity * u], 3.0, noise_std=1.0,
+                         rng=0, precision="single")
+    found = {}
+    for name, c in (("matched", matched(rc)), ("uncalibrated", rc)):
+        proc = RadarProcessor(c, heatmap_unwrap=True, coupling_subtraction=False)
+        nr = proc.num_range_bins
+        rd = proc.cube.doppler(proc.cube.range_cube(adc)[..., :nr])
+        found[name] = proc.detector.cell_aliases(rd)
+    assert found["matched"] is not None and np.any(found["matched"][2] == 1)
+    assert found["uncalibrated"] is None

@@ -599,7 +599,8 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
     rho = calib.waveform.center_frequency / ant.design_frequency
     tx_pos = np.asarray(ant.tx_positions, dtype=np.float64)
     rx_pos = np.asarray(ant.rx_positions, dtype=np.float64)
-    to_frame = calib.waveform.num_samples / RadarProcessor(calib).cube.range_fft_size
+    proc = RadarProcessor(calib)
+    to_frame = calib.waveform.num_samples / proc.cube.range_fft_size
     delay = None
     base = calib
     if estimation_passes(calib) > 1:
@@ -609,7 +610,7 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
         # each channel's range peak against the cell's mean (cells where every channel
         # peaks); passes 2 and 3 correct it with the cells their fits found to hold one
         # scatterer (measured on simulated cascade runs: 0.12 → 0.04 → 0.02 → 0.016 bins rms).
-        _, _, _, offs = _collect(RadarProcessor(calib), frames, s, None, progress)
+        _, _, _, offs = _collect(proc, frames, s, None, progress)
         delay = _median_offsets(offs, None)
         if delay is not None and not np.any(delay):
             # One LO (the single chip): on a single scatterer every channel's range profile is
@@ -622,7 +623,8 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
             base = replace(calib, phase_frequency=measured_calibration(
                 calib, np.ones(delay.shape, dtype=np.complex128), delay))
     for last in ((False, False, True) if delay is not None else (True,)):
-        parts, rates, vels, offs = _collect(RadarProcessor(base), frames, s, velocities,
+        parts, rates, vels, offs = _collect(proc if base is calib else RadarProcessor(base),
+                                            frames, s, velocities,
                                             progress)
         if sum(len(p) for p in parts) < 4:
             raise MissingDataError(f"{calib.name}: no frame has cells {s.min_snr_db:g} dB "
@@ -638,6 +640,4 @@ def estimate_phase_calibration(frames: SequenceOf, calib: RadarCalib,
         delay = delay + more * to_frame
         base = replace(calib, phase_frequency=measured_calibration(
             calib, np.ones(delay.shape, dtype=np.complex128), delay))
-    out = measured_calibration(calib, fit.gain, delay) if delay is not None else \
-        measured_calibration(calib, fit.gain)
-    return PhaseEstimate(out, fit, len(parts), delay)
+    return PhaseEstimate(measured_calibration(calib, fit.gain, delay), fit, len(parts), delay)
