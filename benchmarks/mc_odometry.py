@@ -59,7 +59,9 @@ from coloradar.odometry import (
     radar_inertial_odometry,
     rio_odometry,
 )
+from coloradar.odometry.doppler import DopplerConfig
 from coloradar.odometry.metrics import final_position_error
+from coloradar.odometry.noise_estimate import NoiseEstimateConfig
 from coloradar.odometry.pipeline import ego_velocity_config
 from coloradar.sim.doppler_clouds import CloudModel, simulate_clouds
 from coloradar.sim.imu import GX5_25, simulate_imu
@@ -105,12 +107,16 @@ def _models(rng: np.random.Generator) -> dict[str, CloudModel]:
     return {"single_chip": sc, "cascade": ca}
 
 
+MOTION_KEYS = {"handheld": 0, "vehicle": 1, "ramps": 2}
+"""Each motion's second seed word (runs of one seed differ between motions)."""
+
+
 def _draw_rig(seed: int, motion: str, duration: float, base_T_imu: np.ndarray
               ) -> tuple[RestStart, np.ndarray, np.ndarray, np.ndarray, np.random.Generator, str]:
     """The run's trajectory, IMU times, samples and bias tracks ``(N, 6)``, the generator that
     draws the rest of it and a note (one order of draws, shared by :func:`make_run` and the
     oracles)."""
-    ss = np.random.SeedSequence([seed, 1 if motion == "vehicle" else 0])
+    ss = np.random.SeedSequence([seed, MOTION_KEYS[motion]])
     rng = np.random.default_rng(ss)
     a = rng.uniform(8, 15)
     path = EllipsePath(np.array([0.0, 0.0, 1.0]), (a, rng.uniform(4, a)), 1.4,
@@ -199,9 +205,19 @@ def _nees(res, run: SimRun) -> np.ndarray:
     return np.array(out)
 
 
-def _score(traj: Trajectory, gt: Trajectory) -> tuple[float, float]:
-    return (absolute_trajectory_error(traj, gt).rmse_percent,
-            final_position_error(traj, gt).percent)
+def _score(traj: Trajectory, gt: Trajectory) -> tuple[float, float, float]:
+    """ATE %, final %, and the final vertical error % of the distance."""
+    fin = final_position_error(traj, gt)
+    p_gt = gt.interpolate_arrays(traj.timestamps[[0, -1]])[0]
+    dz = (traj.translations[-1, 2] - traj.translations[0, 2]) - (p_gt[1, 2] - p_gt[0, 2])
+    return (absolute_trajectory_error(traj, gt).rmse_percent, fin.percent,
+            100.0 * abs(dz) / fin.path_length)
+
+
+PREVIOUS = {"doppler": DopplerConfig(planar=None), "extrinsic_rotation_axes": "all",
+            "noise_estimate": NoiseEstimateConfig(enabled=False)}
+"""The filter's settings before issue 42 (planar single-chip points, assumed direction noise,
+all extrinsic axes), run beside the default on the same runs."""
 
 
 def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:
@@ -254,9 +270,10 @@ def told(run: SimRun, oracle: frozenset[str] = frozenset()) -> tuple[np.ndarray,
 
 def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None,
              oracle: frozenset[str] = frozenset()) -> dict[str, tuple]:
-    """Per method: (ATE %, final %, NEES p/v/θ per dof or NaN, seconds); the filters with the
-    settings ``base`` (default :class:`RioConfig`) and either update; every method told the
-    truths in ``oracle`` (:func:`told`)."""
+    """Per method: (ATE %, final %, NEES p/v/θ per dof or NaN, seconds, final vertical %);
+    the filters with the settings ``base`` (default :class:`RioConfig`) and either update,
+    the filter as it was before issue 42 (:data:`PREVIOUS`); every method told the truths
+    in ``oracle`` (:func:`told`)."""
     base = base or RioConfig()
     imu, calib = told(run, oracle)
     tracks, clouds = [], []
@@ -267,17 +284,24 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
         clouds.append(cl)
     out: dict[str, tuple] = {}
     for name, rcfg, pts in (("doppler", replace(base, update="doppler"), clouds),
-                            ("ego-velocity", replace(base, update="ego-velocity"), None)):
+                            ("ego-velocity", replace(base, update="ego-velocity"), None),
+                            ("before 42", replace(base, **PREVIOUS), clouds)):
         t0 = time.perf_counter()
         res = rio_odometry(tracks, calib, run.imu_t, imu, config=rcfg, initial_pose=run.gt,
                            points=pts)
         dt = time.perf_counter() - t0
-        out[name] = (*_score(res.trajectory, run.gt), _nees(res, run), dt)
-    for att in ("imu", "groundtruth"):
-        dr = radar_inertial_odometry(tracks[0], calib, orientation=att, imu_timestamps=run.imu_t,
+        a, f, z = _score(res.trajectory, run.gt)
+        out[name] = (a, f, _nees(res, run), dt, z)
+    t, cl = run.frames[radars[0]]
+    track3 = estimate_ego_velocities(cl, t, ego_velocity_config(calib.radar(radars[0]),
+                                                                planar=False), frame=radars[0])
+    for att, tr in (("imu", tracks[0]), ("groundtruth", tracks[0]), ("gt 3d", track3)):
+        dr = radar_inertial_odometry(tr, calib, orientation="imu" if att == "imu" else
+                                     "groundtruth", imu_timestamps=run.imu_t,
                                      imu_rates=imu[:, 3:], groundtruth=run.gt,
                                      radar=radars[0])
-        out[f"DR {att}"] = (*_score(dr, run.gt), np.full(3, np.nan), 0.0)
+        a, f, z = _score(dr, run.gt)
+        out[f"DR {att}"] = (a, f, np.full(3, np.nan), 0.0, z)
     return out
 
 
@@ -304,7 +328,7 @@ def main() -> None:
     ap.add_argument("--seed0", type=int, default=0)
     ap.add_argument("--duration", type=float, nargs=2, default=(60.0, 120.0))
     ap.add_argument("--configs", default="single,cascade,both")
-    ap.add_argument("--motions", default="handheld,vehicle")
+    ap.add_argument("--motions", default="handheld,vehicle,ramps")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/coloradar_mc"))
     ap.add_argument("--verbose", action="store_true")
     ap.add_argument("--tuning", action="store_true",
@@ -338,28 +362,47 @@ def main() -> None:
         run = cached_run(args.cache, seed, motion, round(dur, 1))
         if args.write_dataset:
             write_dataset(run, args.write_dataset)
+        rest = "rest 0.0s" not in run.note
         for c in results:
             res = evaluate(run, CONFIGS[c], base, oracle)
+            res["_rest"] = rest
+            res["_motion"] = motion
             results[c].append(res)
             if args.verbose:
-                cells = " ".join(f"{m} {v[0]:.2f}/{v[1]:.2f}" for m, v in res.items())
+                cells = " ".join(f"{m} {v[0]:.2f}/{v[1]:.2f}" for m, v in res.items()
+                                 if not m.startswith("_"))
                 print(f"{c:<8} seed {seed:>4} {motion:<8} {dur:5.1f}s {cells} | {run.note}",
                       flush=True)
     for c, rows in results.items():
-        print(f"\n{c}: {len(rows)} runs, ATE % / final % of distance (worst, median)")
-        for m in rows[0]:
-            a = np.array([r[m][0] for r in rows])
-            f = np.array([r[m][1] for r in rows])
-            nees = np.array([r[m][2] for r in rows])
-            extra = "" if np.isnan(nees).all() else (
-                "  NEES/dof p {:.2f} v {:.2f} att {:.2f}".format(*np.median(nees, axis=0)))
-            print(f"  {m:<14} ATE worst {a.max():5.2f} median {np.median(a):5.2f}   final "
-                  f"worst {f.max():5.2f} median {np.median(f):5.2f}{extra}")
-        d = np.array([r["doppler"][1] for r in rows])
-        dr = np.array([r["DR imu"][1] for r in rows])
-        print(f"  doppler final worse than DR imu in {(d > dr).sum()} of {len(rows)} runs")
+        _summary(f"{c}: {len(rows)} runs", rows)
+        _summary(f"{c}, the runs with a rest", [r for r in rows if r["_rest"]])
+        for motion in motions:
+            _summary(f"{c}, {motion}", [r for r in rows if r["_motion"] == motion])
     if args.plot:
         _plot(results, args.plot)
+
+
+def _summary(title: str, rows: list[dict]) -> None:
+    """Worst and median ATE, final and vertical error per method over ``rows``."""
+    if not rows:
+        return
+    print(f"\n{title} ({len(rows)}), % of distance (worst / median)")
+    for m in (k for k in rows[0] if not k.startswith("_")):
+        a = np.array([r[m][0] for r in rows])
+        f = np.array([r[m][1] for r in rows])
+        z = np.array([r[m][4] for r in rows])
+        nees = np.array([r[m][2] for r in rows])
+        sec = np.array([r[m][3] for r in rows])
+        extra = "" if np.isnan(nees).all() else (
+            "  NEES/dof p {:.2f} v {:.2f} att {:.2f}".format(*np.median(nees, axis=0))
+            + f"  {sec.sum():.1f} s")
+        print(f"  {m:<14} ATE {a.max():5.2f} / {np.median(a):5.2f}   final {f.max():5.2f} / "
+              f"{np.median(f):5.2f}   vertical {z.max():5.2f} / {np.median(z):5.2f}{extra}")
+    d = np.array([r["doppler"][1] for r in rows])
+    lo = np.array([r["ego-velocity"][1] for r in rows])
+    dr = np.array([r["DR imu"][1] for r in rows])
+    print(f"  doppler final worse than DR imu in {(d > dr).sum()}, than ego-velocity in "
+          f"{(d > lo).sum()} of {len(rows)} runs")
 
 
 def _plot(results: dict[str, list], path: Path) -> None:
@@ -370,7 +413,7 @@ def _plot(results: dict[str, list], path: Path) -> None:
 
     fig, axes = plt.subplots(1, len(results), figsize=(4.5 * len(results), 4), squeeze=False)
     for ax, (c, rows) in zip(axes[0], results.items(), strict=True):
-        methods = list(rows[0])
+        methods = [m for m in rows[0] if not m.startswith("_")]
         ax.boxplot([[r[m][1] for r in rows] for m in methods], whis=(0, 100))
         ax.set_xticks(range(1, len(methods) + 1), methods, rotation=30, fontsize=8)
         ax.set_title(f"{c} ({len(rows)} runs)")

@@ -68,9 +68,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-extrinsic-rotation", action="store_true",
                    help="filter: take the radar's extrinsic rotation as exact (default: "
                         "refine it online, the calibration's as prior)")
-    p.add_argument("--extrinsic-rotation-axes", choices=("all", "yaw"), default="all",
-                   help="filter: refine the extrinsic's roll, pitch and yaw for a radar that "
-                        "measures v_z (default), or its yaw alone")
+    p.add_argument("--extrinsic-rotation-axes", choices=("auto", "all", "yaw"), default="auto",
+                   help="filter: refine the extrinsic's roll, pitch and yaw (all) or its yaw "
+                        "alone; auto (default): yaw alone for a radar with fewer than 3 "
+                        "elevation rows (the single chip), all for the others")
     p.add_argument("--imu-noise-scale", type=positive_float, default=1.0, metavar="K",
                    help="filter: multiply the IMU noise densities and bias walks of the "
                         "3DM-GX5-25 datasheet by K (default 1)")
@@ -83,9 +84,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--min-inliers", type=int_in(3),
                    help="fewest static points per frame (at least 3; default 6)")
     p.add_argument("--model", choices=("auto", "3d", "planar"), default="auto",
-                   help="estimate vx vy vz (3d) or vx vy with vz = 0 (planar); auto: planar for "
-                        "a radar with fewer than 3 elevation rows (the single chip); for the "
-                        "filter's Doppler-point update, planar uses the points for vx vy only")
+                   help="estimate vx vy vz (3d) or vx vy with vz = 0 (planar: for a rig that "
+                        "is truly planar); auto (default): the filter's Doppler-point update "
+                        "is 3d for every radar, the per-frame ego-velocities are planar for a "
+                        "radar with fewer than 3 elevation rows (the single chip)")
     p.add_argument("--update", choices=UPDATES, default="doppler",
                    help="filter: every Doppler point a measurement, gated point by point "
                         "(doppler, default) or one RANSAC ego-velocity per frame "
@@ -118,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = ego_velocity_config(seq.calib.radar(args.radar), **overrides)
     base = RioConfig()
     k = args.imu_noise_scale
-    planar = None if args.model == "auto" else args.model == "planar"
+    planar = base.doppler.planar if args.model == "auto" else args.model == "planar"
     rio = replace(base, estimate_time_offset=not args.no_time_offset,
                   update=args.update, doppler=replace(base.doppler, planar=planar),
                   time_offset=args.time_offset,

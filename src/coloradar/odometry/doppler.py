@@ -36,6 +36,7 @@ inverted.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,9 +45,21 @@ from scipy.stats import chi2
 from ..errors import SettingsError
 from .eskf import ErrorStateEKF
 
-__all__ = ["DopplerConfig", "PointNoise", "PointSolution", "direction_moments",
-           "doppler_points", "doppler_points_index", "doppler_update", "point_noise_for",
-           "point_variances", "solve_points", "unwrap_rates"]
+__all__ = [
+    "DopplerConfig",
+    "PointNoise",
+    "PointSolution",
+    "angle_basis",
+    "direction_moments",
+    "doppler_points",
+    "doppler_points_index",
+    "doppler_update",
+    "elevation_rows",
+    "point_noise_for",
+    "point_variances",
+    "solve_points",
+    "unwrap_rates",
+]
 
 _DEG = np.pi / 180.0
 
@@ -86,6 +99,18 @@ class PointNoise:
 _ANGLE_STD = {"cascade": (1.0 * _DEG, 1.6 * _DEG), "single_chip": (3.0 * _DEG, 5.0 * _DEG)}
 
 
+def elevation_rows(radar_calib) -> int:
+    """Distinct elevation positions of a radar's virtual array (2 for the single chip, whose
+    elevation is a two-element phase comparison; more for the cascade).
+
+    Parameters
+    ----------
+    radar_calib
+        The radar's :class:`~coloradar.calib.RadarCalib`.
+    """
+    return int(np.unique(radar_calib.antenna.virtual.unique_positions[:, 1]).size)
+
+
 def point_noise_for(radar: str, velocity_bin_width: float | None = None,
                     max_velocity: float | None = None) -> PointNoise:
     """Default :class:`PointNoise` of a radar: the range-rate error is half a Doppler bin, at
@@ -115,10 +140,12 @@ class DopplerConfig:
         Remove the direction errors' bias (module docstring); False: the plain stacked update.
     planar
         Use the points for the radar's ``v_x, v_y`` only (given the filter's ``v_z``);
-        None (default): for the radars whose ego-velocity model is planar (fewer than 3
-        elevation rows: the single chip), 3-D for the others. Chosen by Monte Carlo
-        (docs/odometry.md): the single chip's 3-D points carry a ``v_z`` bias that depends on
-        the direction noise, which the filter does not know exactly.
+        False (default): 3-D for every radar; None: as the radar's ego-velocity model
+        (planar for the single chip). Until issue 42 the single chip's points were planar
+        (``v_z ≈ 0``): rigs that rise, fall and pitch (runs written by another program)
+        showed that assumption making most of its error. Its 3-D points carry a ``v_z`` bias
+        that depends on the direction noise; the filter measures that noise from the data
+        (:mod:`.noise_estimate`) rather than assuming it.
     min_range
         Points closer than this are left out [m] (the rig, antenna leakage).
     noise_uncertainty
@@ -131,7 +158,7 @@ class DopplerConfig:
     min_points: int = 4
     min_fraction: float = 0.3
     errors_in_variables: bool = True
-    planar: bool | None = None
+    planar: bool | None = False
     min_range: float = 0.3
     noise_uncertainty: float = 1.0
 
@@ -184,7 +211,7 @@ def doppler_points_index(cloud: np.ndarray, min_range: float = 0.3
     return np.column_stack([xyz[ok] / rng[ok, None], vr[ok]]), np.flatnonzero(ok)
 
 
-def _angle_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def angle_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Azimuth, elevation and the unit vectors along their increase, of unit vectors (N, 3)."""
     az = np.arctan2(u[:, 1], u[:, 0])
     el = np.arcsin(np.clip(u[:, 2], -1.0, 1.0))
@@ -197,7 +224,7 @@ def _angle_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
 def point_variances(u: np.ndarray, y: np.ndarray, noise: PointNoise) -> np.ndarray:
     """``σ_i² = σ_ṙ² + yᵀ Σ_u,i y`` [m²/s²] of points in directions ``u`` (N, 3) for the
     radar velocity ``y`` (3,) [m/s] (first order in the angle errors)."""
-    _, el, e_az, e_el = _angle_basis(u)
+    _, el, e_az, e_el = angle_basis(u)
     pa = (e_az @ y) * np.cos(el) * noise.azimuth_std
     pe = (e_el @ y) * noise.elevation_std
     return noise.range_rate_std**2 + pa**2 + pe**2
@@ -218,7 +245,7 @@ def direction_moments(u: np.ndarray, sigma_az: float, sigma_el: float
     c : numpy.ndarray
         float64 ``(N, 3, 3)``: the excess second moment, evaluated at the angles of ``u``.
     """
-    az, el, _, _ = _angle_basis(u)
+    az, el, _, _ = angle_basis(u)
     ga1, ge1 = np.exp(-0.5 * sigma_az**2), np.exp(-0.5 * sigma_el**2)
     ga2, ge2 = np.exp(-2.0 * sigma_az**2), np.exp(-2.0 * sigma_el**2)
     cc_e = 0.5 * (1 + np.cos(2 * el) * ge2)            # E[cos² e]
@@ -342,9 +369,15 @@ def solve_points(u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray
     return PointSolution(acc, basis, value, 0.5 * (cov + cov.T))
 
 
+PointObserver = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
+"""Called with a frame's accepted points ``u (K, 3)``, their unwrapped range rates ``(K,)``,
+the predicted radar velocity ``y (3,)`` and its covariance ``(3, 3)`` (before the update)."""
+
+
 def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndarray,
                    noise: PointNoise, config: DopplerConfig, shift: float = 0.0,
-                   planar_vz_std: float | None = None) -> np.ndarray | None:
+                   planar_vz_std: float | None = None,
+                   observe: PointObserver | None = None) -> np.ndarray | None:
     """Update the filter with one frame's Doppler points of radar ``r``.
 
     Parameters
@@ -364,6 +397,8 @@ def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndar
         With ``config.planar``: also the planar model's ``v_z ≈ 0`` (radar frame) with this
         standard deviation [m/s] (:attr:`~coloradar.odometry.rio.RioConfig.planar_vz_std`);
         None: ``v_z`` from the IMU alone, which drifts.
+    observe
+        Given the accepted points, e.g. :meth:`.noise_estimate.PointNoiseEstimator.add`.
 
     Returns
     -------
@@ -378,6 +413,10 @@ def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndar
     sol = solve_points(points[:, :3], points[:, 3], y, py, noise, config)
     if sol is None:
         return None
+    if observe is not None:
+        acc = sol.accepted
+        observe(points[acc, :3], unwrap_rates(points[acc, 3], -(points[acc, :3] @ y),
+                                              noise.max_velocity), y, py)
     basis, value, cov = sol.basis, sol.value, sol.covariance
     if config.planar and planar_vz_std:
         # The planar model's assumption, held loosely: the radar's v_z is about 0.

@@ -40,10 +40,18 @@ from scipy.stats import chi2
 from ..calib import Calibration
 from ..errors import ColoradarError, DataWarning, SettingsError
 from ..geometry import SE3, Trajectory, sensor_to_base
-from .dead_reckoning import integrate_gyro
-from .doppler import DopplerConfig, PointNoise, doppler_points_index, doppler_update, point_noise_for
+from .anchor import anchor_covariance, smoothed_start
+from .doppler import (
+    DopplerConfig,
+    PointNoise,
+    doppler_points_index,
+    doppler_update,
+    elevation_rows,
+    point_noise_for,
+)
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
+from .noise_estimate import NoiseEstimateConfig, PointNoiseEstimator
 from .rio_outputs import KeepPose, PoseOutputs, PoseState
 from .smoother import RtsSmoother
 from .velocity_track import EgoVelocityTrack
@@ -115,10 +123,15 @@ class RioConfig:
     extrinsic_rotation_std
         Prior uncertainty of that rotation [rad].
     extrinsic_rotation_axes
-        ``"all"`` (default): roll, pitch and yaw for a radar whose points measure ``v_z``,
-        yaw alone for a planar radar (its ego-velocity cannot see the others); ``"yaw"``:
-        yaw alone for every radar. A mounting pitch and the body's pitch tilt the measured
-        velocity alike, and only the forward accelerations tell them apart: on the
+        ``"auto"`` (default): yaw alone for a radar with fewer than 3 elevation rows (the
+        single chip), roll, pitch and yaw for the others; ``"all"``: roll, pitch and yaw for
+        a radar whose points measure ``v_z``, yaw alone for a planar radar (its
+        ego-velocity cannot see the others); ``"yaw"``: yaw alone for every radar. On the
+        runs of issue 42 written by another program the single chip's estimated pitch
+        converged to +0.75° where the truth was 0 (final error 0.5 → 1.4 %), its coarse
+        elevations leaving mounting pitch and body pitch barely apart. A mounting pitch and
+        the body's pitch tilt the measured velocity alike, and only the forward
+        accelerations tell them apart: on the
         point-level Monte Carlo (no velocity bias) the estimated pitch wanders and ``"yaw"``
         is ahead, on ADC-level runs (the DSP chain's few-cm/s ``v_z`` bias) ``"all"`` is
         (docs/odometry.md, "Online extrinsic rotation").
@@ -157,7 +170,13 @@ class RioConfig:
         Settings of the Doppler-point update.
     point_noise
         Per radar (in the order of the tracks) the points' noise; None: each radar's default
-        (:func:`~coloradar.odometry.doppler.point_noise_for`).
+        (:func:`~coloradar.odometry.doppler.point_noise_for`). With ``noise_estimate``
+        enabled (the default) this is the prior of the noise measured from the data.
+    noise_estimate
+        The points' range-rate and direction noise measured from their residuals while the
+        filter runs (:mod:`.noise_estimate`), for the per-point gate and the
+        errors-in-variables correction: a constant over-corrects exact directions and
+        under-corrects noisy ones (issue 42).
     smooth
         Offline: the poses smoothed with the later measurements too (Rauch–Tung–Striebel,
         :mod:`.smoother`); covariances, velocities and biases stay the filter's. Off by
@@ -180,7 +199,7 @@ class RioConfig:
     extrinsic_warmup: float = 0.0
     estimate_extrinsic_rotation: bool = True
     extrinsic_rotation_std: float = 1.0 * _DEG
-    extrinsic_rotation_axes: str = "all"
+    extrinsic_rotation_axes: str = "auto"
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
     planar_vz_std: float = 0.05
     zupt_std: float = 0.005
@@ -191,6 +210,7 @@ class RioConfig:
     update: str = "doppler"
     doppler: DopplerConfig = field(default_factory=DopplerConfig)
     point_noise: tuple[PointNoise, ...] | None = None
+    noise_estimate: NoiseEstimateConfig = field(default_factory=NoiseEstimateConfig)
     smooth: bool = False
 
     def __post_init__(self) -> None:
@@ -208,8 +228,9 @@ class RioConfig:
             raise SettingsError(f"max_rejected must be >= 1, got {self.max_rejected}")
         if not 0 < self.gate_probability <= 1:
             raise SettingsError(f"gate_probability must be in (0, 1], got {self.gate_probability}")
-        if self.extrinsic_rotation_axes not in ("yaw", "all"):
-            raise SettingsError(f"RioConfig.extrinsic_rotation_axes must be 'yaw' or 'all', "
+        if self.extrinsic_rotation_axes not in ("auto", "yaw", "all"):
+            raise SettingsError(f"RioConfig.extrinsic_rotation_axes must be 'auto', 'yaw' or "
+                                "'all', "
                                 f"got {self.extrinsic_rotation_axes!r}")
         if self.update not in UPDATES:
             raise SettingsError(f"unknown radar update {self.update!r}; expected one of "
@@ -269,6 +290,9 @@ class RioResult:
     filtered
         With ``RioConfig.smooth``: the filter's own poses (causal, as without it), anchored
         alike; ``trajectory`` is then the smoothed one. None otherwise.
+    point_noise
+        Per radar, the points' noise at the end of the run: measured from the data
+        (``RioConfig.noise_estimate``) or the prior (None without points).
     """
 
     trajectory: Trajectory
@@ -289,12 +313,21 @@ class RioResult:
     static_points: list[np.ndarray | None] | None = None
     kept: np.ndarray | None = None
     filtered: Trajectory | None = None
+    point_noise: tuple[PointNoise, ...] | None = None
 
 
 def _planar(track: EgoVelocityTrack) -> bool:
     ok = track.ok & np.all(np.isfinite(track.velocity), axis=1)
     return bool(ok.any()) and bool(np.all(track.velocity[ok, 2] == 0.0)
                                    and np.all(track.covariance[ok, 2, :] == 0.0))
+
+
+def _coarse_elevation(calib: Calibration, radar: str) -> bool:
+    """Whether the radar's array has fewer than 3 elevation rows (unknown radars: no)."""
+    try:
+        return elevation_rows(calib.radar(radar)) < 3
+    except (KeyError, ValueError, AttributeError, ColoradarError):
+        return False
 
 
 def _initial_motion(track: EgoVelocityTrack, sel: np.ndarray, ekf: ErrorStateEKF,
@@ -423,6 +456,7 @@ class _Setup:
     planar: list[bool]
     pts: list[_FramePoints] | None
     noises: tuple[PointNoise, ...]
+    estimators: list[PointNoiseEstimator]
     dcfg: list[DopplerConfig]
     ext_yaw_only: list[bool]
     static: list[np.ndarray]
@@ -472,8 +506,11 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
             for p in planar]
     # Radars whose points observe v_z see the extrinsic's roll and pitch as well (not
     # estimated with extrinsic_rotation_axes "yaw").
-    ext_yaw_only = [cfg.extrinsic_rotation_axes == "yaw" or (p and (pts is None or bool(d.planar)))
-                    for p, d in zip(planar, dcfg, strict=True)]
+    coarse = [cfg.extrinsic_rotation_axes == "auto" and _coarse_elevation(calib, n)
+              for n in names]
+    ext_yaw_only = [cfg.extrinsic_rotation_axes == "yaw" or c
+                    or (p and (pts is None or bool(d.planar)))
+                    for p, d, c in zip(planar, dcfg, coarse, strict=True)]
     zv = cfg.zero_velocity
     static = []
     for r, tr in enumerate(tr_list):
@@ -487,7 +524,9 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
             st = own if st is None else st | own
         static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv, st))
     return _Setup(cfg, tr_list, names, imu_t, imu_d, ekf, base_T_imu.inverse(), ext,
-                  [e.translation for e in ext], planar, pts, noises, dcfg, ext_yaw_only, static)
+                  [e.translation for e in ext], planar, pts, noises,
+                  [PointNoiseEstimator(n, cfg.noise_estimate) for n in noises], dcfg,
+                  ext_yaw_only, static)
 
 
 def _first_frame(s: _Setup) -> tuple[int, np.ndarray, np.ndarray, float]:
@@ -648,8 +687,10 @@ class _Loop:
             # updates as a moving frame does.
             still = bool(s.static[r][k]) and self._zero_velocity(tau, st)
             if s.pts is not None and not still and s.pts[r][k][0].shape[0]:
-                used = doppler_update(ekf, r, s.t_ir[r], s.pts[r][k][0], s.noises[r],
-                                      s.dcfg[r], min(want - tau, 0.0), s.cfg.planar_vz_std)
+                est = s.estimators[r]
+                used = doppler_update(ekf, r, s.t_ir[r], s.pts[r][k][0], est.noise,
+                                      s.dcfg[r], min(want - tau, 0.0), s.cfg.planar_vz_std,
+                                      est.add)
                 st["points"] += s.pts[r][k][0].shape[0]
             if still:
                 pass                    # the zero-velocity update was this frame's update
@@ -776,73 +817,6 @@ class _Loop:
         self.out.record(i, k, tau, ekf.R, ekf.p, state, base)
 
 
-def _smoothed_start(s: _Setup, out_t: np.ndarray, out_R: np.ndarray, bg_c: np.ndarray
-                    ) -> np.ndarray:
-    """The attitudes ``world_R_imu`` of the poses with the first ``anchor_delay`` seconds'
-    replaced by the attitude at ``anchor_delay`` carried back by the gyro, corrected by the
-    bias ``bg_c`` estimated there.
-
-    The first attitude estimates are the least certain (gravity aligned, possibly while
-    moving); the filter's attitude a few seconds later, carried back, is better (a fixed-lag
-    smoothing of the start). Without it a start-up tilt error of the first pose tilts the
-    whole trajectory once the first poses are put on the truth's."""
-    c = int(np.searchsorted(out_t, out_t[0] + s.cfg.anchor_delay))
-    c = min(c, len(out_t) - 1)
-    if c == 0:
-        return out_R
-    sel = (s.imu_t > out_t[0]) & (s.imu_t < out_t[c])
-    tg, inv = np.unique(np.concatenate([out_t[:c + 1], s.imu_t[sel]]), return_inverse=True)
-    _, wg = s.ekf.imu_at(tg)
-    cum = integrate_gyro(tg, wg, bias=bg_c)             # imu(t_0)_R_imu(t)
-    pos = inv[:c + 1]
-    back = cum[pos].inv() * cum[pos[-1]]                # imu(t_i)_R_imu(t_c)
-    out = out_R.copy()
-    out[:c] = (Rotation.from_matrix(out_R[c]) * back[:c].inv()).as_matrix()
-    return out
-
-
-def _anchor_covariance(cov_c: np.ndarray, p0: np.ndarray, pos: np.ndarray, vel: np.ndarray,
-                       cov: np.ndarray, vcov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The output's pose and velocity covariances with the anchor's tilt error added.
-
-    The output is rotated so that its first pose lies on the initial pose, and that first
-    attitude is the filter's at pose ``c`` carried back (:func:`_smoothed_start`): its tilt
-    error ``δθ₀`` (world x, y; the filter's own estimate at ``c``) is imposed on every pose.
-    To first order pose ``i`` then errs by ``δθ₀`` in attitude, ``δθ₀ × (p_i − p_0)`` in
-    position and ``δθ₀ × v_i`` in velocity on top of the filter's own error (the tilt is
-    observable, so the filter's later tilt error soon decorrelates from ``δθ₀``; its yaw
-    error does not, and already includes the anchor's, so yaw is left out).
-
-    Parameters
-    ----------
-    cov_c
-        float64 ``(6, 6)``: the covariance at the anchoring pose ``c``.
-    p0
-        float64 ``(3,)``: the first pose's position [m].
-    pos, vel
-        float64 ``(M, 3)``: positions [m] and velocities [m/s] of the poses whose covariances
-        are given, filter world frame.
-    cov, vcov
-        float64 ``(M, 6, 6)`` (position, attitude) and ``(M, 3, 3)``, filter world frame.
-
-    Returns
-    -------
-    cov, vcov
-        The same shapes, with the anchor's tilt error added.
-    """
-    p_tilt = cov_c[3:, 3:].copy()
-    p_tilt[2, :] = 0.0
-    p_tilt[:, 2] = 0.0
-    m = len(pos)
-    g = np.zeros((m, 6, 3))
-    g[:, :3] = -skew(pos - p0)
-    g[:, 3:] = np.eye(3)
-    sv = skew(vel)
-    cov = cov + g @ p_tilt @ g.transpose(0, 2, 1)
-    vcov = vcov + sv @ p_tilt @ sv.transpose(0, 2, 1)
-    return cov, vcov
-
-
 def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioResult:
     """The loop's poses re-anchored at the initial pose, as a :class:`RioResult`."""
     out = lp.out
@@ -865,7 +839,8 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioR
     def anchored(out_p: np.ndarray, out_R: np.ndarray, name: str
                  ) -> tuple[Trajectory, np.ndarray, Rotation]:
         # world_T_base in the filter's frame, then re-anchored at the initial pose.
-        rot_imu = Rotation.from_matrix(_smoothed_start(s, out_t, out_R, out_b[ci, 2]))
+        rot_imu = Rotation.from_matrix(smoothed_start(s.ekf, s.imu_t, s.cfg.anchor_delay,
+                                                      out_t, out_R, out_b[ci, 2]))
         rot_base = rot_imu * s.imu_T_base.rotation
         pos_base = out_p + rot_imu.apply(np.tile(s.imu_T_base.translation, (n, 1)))
         a_rot = pose0.rotation * rot_base[0].inv()
@@ -878,7 +853,7 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioR
     filtered = (None if lp.filtered is None else
                 anchored(*lp.filtered, f"{s.names[0]} radar-inertial EKF")[0])
     sel = slice(None) if kept is None else kept
-    out_cov, out_vcov = _anchor_covariance(out_cov[ci], pos_base[0], pos_base[sel],
+    out_cov, out_vcov = anchor_covariance(out_cov[ci], pos_base[0], pos_base[sel],
                                            out_v, out_cov, out_vcov)
     am = a_rot.as_matrix()
     big = np.zeros((6, 6))
@@ -889,7 +864,8 @@ def _result(s: _Setup, lp: _Loop, initial_pose: SE3 | Trajectory | None) -> RioR
                      a_rot.apply(out_v).reshape(-1, 3), out_b[:, 0], out_b[:, 1], out_b[:, 2],
                      out_b[:, 3], out_td[:, 0], out_td[:, 1], phi, s.names,
                      s.static[0][lp.k0:lp.k0 + n], lp.stats, am @ out_vcov @ am.T,
-                     masks if s.pts is not None else None, kept, filtered)
+                     masks if s.pts is not None else None, kept, filtered,
+                     tuple(e.noise for e in s.estimators) if s.pts is not None else None)
 
 
 def rio_odometry(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibration,
@@ -980,6 +956,10 @@ def rio_summary(result: RioResult, config: RioConfig | None = None) -> dict:
         "extrinsic_rotation_correction_deg": _floats(np.degrees(r.extrinsic_rotation), 6),
         "static_frames": int(r.static.sum()),
         "stats": r.stats,
+        "point_noise": None if r.point_noise is None else [
+            {"range_rate_std_m_s": float(n.range_rate_std),
+             "azimuth_std_deg": float(np.degrees(n.azimuth_std)),
+             "elevation_std_deg": float(np.degrees(n.elevation_std))} for n in r.point_noise],
         "poses": {
             "timestamp": _floats(r.trajectory.timestamps),
             "radar_timestamp": _floats(r.frame_timestamps),

@@ -166,11 +166,23 @@ MOTION_PROFILES: dict[str, dict] = {
         "pitch": (np.radians(3.0), (0.05, 0.5)),
         "roll": (np.radians(1.5), (0.1, 0.6)),
     },
+    "ramps": {
+        "speed_factor": 1.0,
+        # A rig carried over ramps and slopes (issue 42, as the runs written by another
+        # program move): a 2 Hz step bob of ±3 cm, ±0.5 m of height at 0.02–0.06 Hz (up to
+        # about 0.15 m/s of climb), pitch and roll of several degrees at the gait's rates.
+        "offset": ((0.015, 0.015, 0.03), (1.6, 2.2)),
+        "heave": (0.5, (0.02, 0.06)),
+        "yaw": (np.radians(4.0), (0.1, 0.9)),
+        "pitch": (np.radians(4.5), (0.5, 0.9)),
+        "roll": (np.radians(5.5), (0.6, 1.0)),
+    },
 }
 """Named motion profiles: ``smooth`` (default; a carefully carried rig), ``handheld`` (walking
 gait: bob, sway and tilt at the step rate), ``aggressive`` (fast, large rotations) and
 ``vehicle`` (1.5× the path's speed, slow pitch of a few degrees and tens of centimetres of
-heave, as slopes and suspension give a cart or car)."""
+heave, as slopes and suspension give a cart or car) and ``ramps`` (a walk that rises and falls
+by ±0.5 m over tens of seconds, with a step bob and several degrees of pitch and roll)."""
 
 
 def _random_sinusoids(rng: np.random.Generator, amplitude: float, band: tuple[float, float],
@@ -214,6 +226,14 @@ def make_trajectory(path: Path, profile: str = "smooth",
         path = replace(path, speed=path.speed * spec["speed_factor"])
     amps, band = spec["offset"]
     offset = tuple(_random_sinusoids(rng, a, band) for a in amps)
+    if "heave" in spec:
+        # Slow rise and fall on top of the gait's bob (drawn after it: the other profiles'
+        # draws stay as they were).
+        h = _random_sinusoids(rng, *spec["heave"], n=2)
+        z = offset[2]
+        offset = (offset[0], offset[1], Sinusoids(np.concatenate([z.amplitude, h.amplitude]),
+                                                  np.concatenate([z.frequency, h.frequency]),
+                                                  np.concatenate([z.phase, h.phase])))
     return RigTrajectory(path, offset,  # type: ignore[arg-type]
                          _random_sinusoids(rng, *spec["yaw"]),
                          _random_sinusoids(rng, *spec["pitch"]),
