@@ -369,9 +369,10 @@ def solve_points(u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray
     return PointSolution(acc, basis, value, 0.5 * (cov + cov.T))
 
 
-PointObserver = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
+PointObserver = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, "PointSolution"], None]
 """Called with a frame's accepted points ``u (K, 3)``, their unwrapped range rates ``(K,)``,
-the predicted radar velocity ``y (3,)`` and its covariance ``(3, 3)`` (before the update)."""
+the predicted radar velocity ``y (3,)`` and its covariance ``(3, 3)`` (before the update), and
+the frame's :class:`PointSolution`."""
 
 
 def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndarray,
@@ -394,9 +395,11 @@ def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndar
         The frame's time minus the filter's [s] (≤ 0: a frame whose time has passed is
         predicted to first order along the time-offset column).
     planar_vz_std
-        With ``config.planar``: also the planar model's ``v_z ≈ 0`` (radar frame) with this
-        standard deviation [m/s] (:attr:`~coloradar.odometry.rio.RioConfig.planar_vz_std`);
-        None: ``v_z`` from the IMU alone, which drifts.
+        Also ``v_z ≈ 0`` (radar frame) with this standard deviation [m/s]: with
+        ``config.planar`` the planar model's assumption
+        (:attr:`~coloradar.odometry.rio.RioConfig.planar_vz_std`), else a soft prior of the
+        rig's vertical motion (:class:`~coloradar.odometry.noise_estimate.VerticalPrior`);
+        None: no such row.
     observe
         Given the accepted points, e.g. :meth:`.noise_estimate.PointNoiseEstimator.add`.
 
@@ -416,10 +419,11 @@ def doppler_update(ekf: ErrorStateEKF, r: int, t_ir: np.ndarray, points: np.ndar
     if observe is not None:
         acc = sol.accepted
         observe(points[acc, :3], unwrap_rates(points[acc, 3], -(points[acc, :3] @ y),
-                                              noise.max_velocity), y, py)
+                                              noise.max_velocity), y, py, sol)
     basis, value, cov = sol.basis, sol.value, sol.covariance
-    if config.planar and planar_vz_std:
-        # The planar model's assumption, held loosely: the radar's v_z is about 0.
+    if planar_vz_std:
+        # The planar model's assumption, held loosely (or, for the 3-D model, the rig's
+        # vertical motion as a soft prior): the radar's v_z is about 0.
         basis = np.vstack([basis, [0.0, 0.0, 1.0]])
         value = np.append(value, 0.0)
         k = cov.shape[0]

@@ -29,7 +29,7 @@ from scipy.optimize import nnls
 from ..errors import SettingsError
 from .doppler import PointNoise, angle_basis
 
-__all__ = ["NoiseEstimateConfig", "PointNoiseEstimator"]
+__all__ = ["NoiseEstimateConfig", "PointNoiseEstimator", "VerticalPrior"]
 
 _MIN_DESIGN = np.array([1.0, np.sin(np.radians(30.0)) ** 2, np.sin(np.radians(6.0)) ** 2]) ** 2
 """The smallest design magnitudes of the prior's pseudo-points (squared, per variance)."""
@@ -98,7 +98,8 @@ class PointNoiseEstimator:
         """Points added so far."""
         return self._n
 
-    def add(self, u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray) -> None:
+    def add(self, u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray,
+            solution: object = None) -> None:
         """Add a frame's static points and update :attr:`noise`.
 
         Parameters
@@ -109,6 +110,8 @@ class PointNoiseEstimator:
         y, py
             The predicted radar velocity ``(3,)`` [m/s] and its covariance ``(3, 3)``
             [m²/s²], before the frame's update.
+        solution
+            Unused (the :data:`~coloradar.odometry.doppler.PointObserver` signature).
         """
         if not self.config.enabled or u.shape[0] == 0:
             return
@@ -142,3 +145,53 @@ class PointNoiseEstimator:
         cap = 2.0 * np.sqrt(self._s_prior[1:])
         az, el = np.minimum(np.sqrt(s[1:]), np.maximum(cap, _MIN_CAP))
         return PointNoise(rr, float(az), float(el), self.prior.max_velocity)
+
+
+class VerticalPrior:
+    """The rig's vertical motion as a soft prior: the radar's ``v_z ≈ 0`` with a standard
+    deviation measured from the data (issue 42, item 3).
+
+    A rig carried or driven moves mostly along the radar's boresight; how far it moves along
+    the radar's z shows in the frames' own 3-D point solutions: ``E[ŷ_z²] = E[y_z²] +
+    var(ŷ_z)``, so the mean of ``ŷ_z² − var(ŷ_z)`` over recent frames (exponential window of
+    ``window`` frames) is the prior's variance, at least ``floor²``. It comes from the
+    measurements, not from the filter's estimate, so the prior cannot talk itself into a
+    planar rig: on a ramp or a pitching rig it widens by itself. Frames whose points do not
+    observe all three directions are not counted; until ``min_frames`` have been, no prior.
+
+    Parameters
+    ----------
+    floor
+        Smallest standard deviation [m/s].
+    window
+        Frames in the exponential window.
+    min_frames
+        Frames counted before the prior is given.
+    """
+
+    def __init__(self, floor: float = 0.02, window: float = 300.0, min_frames: int = 30
+                 ) -> None:
+        self.floor, self.window, self.min_frames = floor, window, min_frames
+        self._mean = 0.0
+        self._n = 0
+
+    @property
+    def std(self) -> float | None:
+        """The prior's standard deviation [m/s], or None (too few frames yet)."""
+        if self._n < self.min_frames:
+            return None
+        return float(np.sqrt(max(self._mean, self.floor**2)))
+
+    def add(self, u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray,
+            solution: object = None) -> None:
+        """Count a frame's point solution (a :class:`~coloradar.odometry.doppler.PointSolution`;
+        the other arguments are those of the observer signature, unused)."""
+        basis = getattr(solution, "basis", None)
+        if basis is None or basis.shape[0] < 3:
+            return
+        b_inv = np.linalg.inv(basis)
+        yz = float((b_inv @ solution.value)[2])          # type: ignore[attr-defined]
+        var = float((b_inv @ solution.covariance @ b_inv.T)[2, 2])  # type: ignore[attr-defined]
+        self._n += 1
+        a = 1.0 / min(self._n, self.window)
+        self._mean += a * (yz * yz - var - self._mean)
