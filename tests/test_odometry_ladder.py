@@ -16,14 +16,13 @@ trajectories and their exact derivatives; not :mod:`coloradar.sim`). Two groups 
   of :data:`SLACK` (0.02 % of distance) so that a tie cannot fail by noise.
 
 The ladder checks whatever the default is: ``benchmarks/ladder_odometry.py`` prints its
-figures with the alternatives over several seeds. With the planar default of commit
-742ed9d, three of these checks failed: rungs 1 and 3 (walk) the dead-reckoning check (ATE
-0.21 % against 1.5 × 0.055 + 0.02) and rung 2 (vehicle, exact directions) the loosely coupled
-check (0.088 % against 0.028 + 0.02). With the 3-D default and the point noise measured from
-the data (issue 42) one fails, marked a strict xfail (:data:`KNOWN_MISSES`): rung 2's loosely
-coupled check (0.058 % against 0.028 + 0.02), where a vehicle's radar-frame ``v_z`` is 0 and
-the planar loosely coupled update holds exactly that; it is an open item of issue 42, and a
-strict xfail fails the day it passes.
+figures with the alternatives over several seeds. The default is still planar for the
+single chip (issue 42 is open: the 3-D mode, ``--model 3d``, is far ahead on these rungs and
+on runs written by another program, but drifts in height on the project's Monte Carlo;
+docs/odometry.md, "3-D single chip"). Three checks fail with it and are strict xfails
+(:data:`KNOWN_MISSES`): rungs 1 and 3 (walk, rising and falling) the dead-reckoning check
+(ATE 0.21 % against 1.5 × 0.055 + 0.02) and rung 2 (vehicle, exact directions) the loosely
+coupled check (0.088 % against 0.028 + 0.02). A strict xfail fails the day it passes.
 """
 
 from __future__ import annotations
@@ -223,19 +222,26 @@ def figures(rung: int) -> Figures:
 RUNG_IDS = [f"{r}-{lad.RUNG_NAMES[r].replace(' ', '_')}" for r in lad.RUNGS]
 
 
-@pytest.mark.parametrize("rung", list(lad.RUNGS), ids=RUNG_IDS)
+KNOWN_MISSES = {
+    "dr": {1: "issue 42 open: the planar default cannot follow a walk that rises and falls",
+           3: "issue 42 open: the planar default cannot follow a walk that rises and falls"},
+    "loose": {2: "issue 42 open: on a vehicle with exact directions the loosely coupled "
+                 "update beats the Doppler-point update"},
+}
+
+
+def _rungs(check: str) -> list:
+    return [pytest.param(r, marks=pytest.mark.xfail(reason=KNOWN_MISSES[check][r], strict=True))
+            if r in KNOWN_MISSES[check] else r for r in lad.RUNGS]
+
+
+@pytest.mark.parametrize("rung", _rungs("dr"), ids=RUNG_IDS)
 def test_default_is_within_1_5x_dead_reckoning_with_true_attitude(rung):
     f = figures(rung)
     assert f.default[0] <= DR_FACTOR * f.dr_true_3d[0] + SLACK, f"rung {rung}: {f.line()}"
 
 
-KNOWN_MISSES = {2: "issue 42 open: on a vehicle with exact directions the planar loosely "
-                   "coupled update (v_z = 0, true there) beats the 3-D default"}
-
-
-@pytest.mark.parametrize("rung", [pytest.param(r, marks=pytest.mark.xfail(
-    reason=KNOWN_MISSES[r], strict=True)) if r in KNOWN_MISSES else r for r in lad.RUNGS],
-    ids=RUNG_IDS)
+@pytest.mark.parametrize("rung", _rungs("loose"), ids=RUNG_IDS)
 def test_default_is_no_worse_than_the_loosely_coupled_update(rung):
     f = figures(rung)
     assert f.default[0] <= f.loose[0] + SLACK, f"rung {rung}: {f.line()}"

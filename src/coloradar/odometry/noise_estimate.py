@@ -45,7 +45,8 @@ class NoiseEstimateConfig:
     ----------
     enabled
         Measure the noise from the data; False: the prior (the radar's stated accuracy or
-        ``RioConfig.point_noise``) throughout.
+        ``RioConfig.point_noise``) throughout; None (default): for the radars whose points
+        are used in 3-D (the planar single chip's settings were tuned with the prior).
     prior_points
         Weight of the prior, in points (per variance): until about this many informative
         points have been seen the prior dominates. 300: about fifteen frames of the single
@@ -54,7 +55,7 @@ class NoiseEstimateConfig:
         Floor of the estimated range-rate noise [m/s] (a Doppler bin is never exact).
     """
 
-    enabled: bool = True
+    enabled: bool | None = None
     prior_points: float = 300.0
     min_range_rate_std: float = 0.01
 
@@ -113,7 +114,7 @@ class PointNoiseEstimator:
         solution
             Unused (the :data:`~coloradar.odometry.doppler.PointObserver` signature).
         """
-        if not self.config.enabled or u.shape[0] == 0:
+        if self.config.enabled is False or u.shape[0] == 0:
             return
         _, el, e_az, e_el = angle_basis(u)
         r = rates + u @ y

@@ -543,7 +543,10 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
         static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv, st))
     return _Setup(cfg, tr_list, names, imu_t, imu_d, ekf, base_T_imu.inverse(), ext,
                   [e.translation for e in ext], planar, pts, noises,
-                  [PointNoiseEstimator(n, cfg.noise_estimate) for n in noises],
+                  [PointNoiseEstimator(n, replace(
+                      cfg.noise_estimate, enabled=not d.planar
+                      if cfg.noise_estimate.enabled is None else cfg.noise_estimate.enabled))
+                   for n, d in zip(noises, dcfg, strict=True)],
                   [VerticalPrior() for _ in noises], dcfg,
                   ext_yaw_only, static)
 
