@@ -61,7 +61,6 @@ from coloradar.odometry import (
 )
 from coloradar.odometry.doppler import DopplerConfig
 from coloradar.odometry.metrics import final_position_error
-from coloradar.odometry.noise_estimate import NoiseEstimateConfig
 from coloradar.odometry.pipeline import ego_velocity_config
 from coloradar.sim.doppler_clouds import CloudModel, simulate_clouds
 from coloradar.sim.imu import GX5_25, simulate_imu
@@ -214,10 +213,9 @@ def _score(traj: Trajectory, gt: Trajectory) -> tuple[float, float, float]:
             100.0 * abs(dz) / fin.path_length)
 
 
-PREVIOUS = {"doppler": DopplerConfig(planar=None), "extrinsic_rotation_axes": "all",
-            "noise_estimate": NoiseEstimateConfig(enabled=False)}
-"""The filter's settings before issue 42 (planar single-chip points, assumed direction noise,
-all extrinsic axes), run beside the default on the same runs."""
+MODEL_3D = {"doppler": DopplerConfig(planar=False)}
+"""``--model 3d``: the Doppler-point update in 3-D for every radar (the point noise measured
+from the data, the single chip's extrinsic refined in yaw), run beside the default."""
 
 
 def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:
@@ -272,7 +270,7 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
              oracle: frozenset[str] = frozenset()) -> dict[str, tuple]:
     """Per method: (ATE %, final %, NEES p/v/θ per dof or NaN, seconds, final vertical %);
     the filters with the settings ``base`` (default :class:`RioConfig`) and either update,
-    the filter as it was before issue 42 (:data:`PREVIOUS`); every method told the truths
+    the filter with ``--model 3d`` (:data:`MODEL_3D`); every method told the truths
     in ``oracle`` (:func:`told`)."""
     base = base or RioConfig()
     imu, calib = told(run, oracle)
@@ -285,7 +283,7 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
     out: dict[str, tuple] = {}
     for name, rcfg, pts in (("doppler", replace(base, update="doppler"), clouds),
                             ("ego-velocity", replace(base, update="ego-velocity"), None),
-                            ("before 42", replace(base, **PREVIOUS), clouds)):
+                            ("3d", replace(base, **MODEL_3D), clouds)):
         t0 = time.perf_counter()
         res = rio_odometry(tracks, calib, run.imu_t, imu, config=rcfg, initial_pose=run.gt,
                            points=pts)

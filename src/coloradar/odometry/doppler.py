@@ -285,17 +285,30 @@ class PointSolution:
     accepted
         bool ``(N,)``: points that passed the per-point gate.
     basis
-        float64 ``(k, 3)``: rows the observed directions of ``y`` (k ≤ 3).
+        float64 ``(k, 3)`` (k = 3, or 2 with ``DopplerConfig.planar``): the regressor of the
+        linear measurement ``value = basis @ y + noise``: the frame's weighted normal
+        equations, with the errors-in-variables correction their expectation
+        ``Σ w diag(k)(u uᵀ − C)`` (weights ``w`` [s²/m²]).
     value
-        float64 ``(k,)``: the measurement ``basis @ y`` [m/s].
+        float64 ``(k,)``: the right-hand side ``−Σ w u ṙ`` [s/m].
     covariance
-        float64 ``(k, k)`` [m²/s²].
+        float64 ``(k, k)``: of ``value`` [s²/m²].
     """
 
     accepted: np.ndarray
     basis: np.ndarray
     value: np.ndarray
     covariance: np.ndarray
+
+
+def _expected_regressor(u: np.ndarray, w: np.ndarray, sigma_az: float, sigma_el: float
+                        ) -> np.ndarray:
+    """``Σ w_i diag(k_i) (u_i u_iᵀ − C_i)``: what the normal equations' right-hand side
+    ``b = −Σ w_i u_i ṙ_i`` of noisy directions ``u`` (N, 3) is, in expectation, times ``y``
+    (first order in the angle variances; :func:`direction_moments`)."""
+    k, c = direction_moments(u, sigma_az, sigma_el)
+    m = u[:, :, None] * u[:, None, :] - c
+    return np.einsum("n,ni,nij->ij", w, k, m)
 
 
 def solve_points(u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray,
@@ -331,42 +344,24 @@ def solve_points(u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray
     ua, ra, sa = u[acc], rates[acc], sig2[acc]
     eiv = config.errors_in_variables and (noise.azimuth_std > 0 or noise.elevation_std > 0)
     # Weights that depend on the noisy directions correlate with their errors and bias the
-    # corrected solution (by 0.4 % of the speed at 3°/5°): the corrected solve weighs the
-    # frame's points alike, and its covariance keeps each point's own variance (sandwich).
+    # correction (by 0.4 % of the speed at 3°/5°): with the correction the frame's points
+    # are weighed alike, and the covariance keeps each point's own variance (sandwich).
     w = np.full(m, 1.0 / sa.mean()) if eiv else 1.0 / sa
-    a = (ua * w[:, None]).T @ ua
+    b = -(ua * (w * ra)[:, None]).sum(axis=0)
     meat = (ua * (w * w * sa)[:, None]).T @ ua
-    j_sig = np.zeros(3)
+    a_e = (ua * w[:, None]).T @ ua
     if eiv:
-        k, c = direction_moments(ua, noise.azimuth_std, noise.elevation_std)
-        a_c = a - np.einsum("n,nij->ij", w, c)
+        a_e = _expected_regressor(ua, w, noise.azimuth_std, noise.elevation_std)
         # The direction noise is known only roughly (σ² within a factor of two): the
-        # correction's own uncertainty, (A_c⁻¹ ΔC y), goes into the covariance.
-        _, c2 = direction_moments(ua, noise.azimuth_std * np.sqrt(2),
-                                  noise.elevation_std * np.sqrt(2))
-        j_sig = np.einsum("n,nij->ij", w, c2 - c) @ y
-        b = -((ua / k) * (w * ra)[:, None]).sum(axis=0)
-    else:
-        a_c = a
-        b = -(ua * (w * ra)[:, None]).sum(axis=0)
-    g = np.eye(3)
+        # correction's own uncertainty, ΔA_e y, goes into the covariance.
+        j_sig = (_expected_regressor(ua, w, noise.azimuth_std * np.sqrt(2),
+                                     noise.elevation_std * np.sqrt(2)) - a_e) @ y
+        meat = meat + config.noise_uncertainty * np.outer(j_sig, j_sig)
+    basis, value, cov = a_e, b, meat
     if config.planar:
-        # The points inform the x-y velocity only: their normal equations' x-y block given
-        # v_z, i.e. a measurement of y_xy + A_xy⁻¹ A_xz y_z (v_z itself from the IMU).
-        g = np.column_stack([np.eye(2), np.linalg.solve(a_c[:2, :2], a_c[:2, 2])])
-        a, a_c, b, meat, j_sig = a[:2, :2], a_c[:2, :2], b[:2], meat[:2, :2], j_sig[:2]
-    lam, q = np.linalg.eigh(a_c)
-    qaq = np.einsum("ik,ij,jk->k", q, a, q)
-    # A direction whose corrected information is a small part of its raw information is one
-    # the points barely see: its corrected solve would amplify noise, so it is left out.
-    keep = lam > 0.1 * np.maximum(qaq, 1e-300)
-    if not keep.any():
-        return None
-    q, lam = q[:, keep], lam[keep]
-    value = (q.T @ b) / lam
-    js = (q.T @ j_sig) / lam
-    cov = (q.T @ meat @ q) / np.outer(lam, lam) + config.noise_uncertainty * np.outer(js, js)
-    basis = q.T @ g
+        # The points inform the x-y velocity only: their x and y normal equations, with v_z
+        # taken from the filter's state.
+        basis, value, cov = a_e[:2], b[:2], meat[:2, :2]
     return PointSolution(acc, basis, value, 0.5 * (cov + cov.T))
 
 
