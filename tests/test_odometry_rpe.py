@@ -1,5 +1,6 @@
-"""RPE pose pairing: evo's rules (consecutive segments, all pairs) and every-pose pairing, checked
-against brute-force loops written from the rules' statements, and against hand-counted pairs."""
+"""RPE pose pairing: evo's rules (consecutive segments, all pairs), rpg_trajectory_evaluation's and
+every-pose pairing, checked against brute-force loops written from the rules' statements, and
+against hand-counted pairs."""
 
 from __future__ import annotations
 
@@ -80,8 +81,28 @@ def _errors(est, ref, pairs):
     return np.array(te), np.array(re)
 
 
+def _brute_rpg(p, d):
+    """rpg_trajectory_evaluation's ``compute_comparison_indices_length``: for each i the j
+    whose path length from i is nearest to d, kept when strictly within 0.2·d (the earlier on
+    a tie); fewer than two pairs give none."""
+    # As rpg does: distances from the start, one scan per pose (Python floats: fast enough).
+    steps = [float(np.linalg.norm(p[k] - p[k - 1])) for k in range(1, len(p))]
+    acc = [0.0]
+    for x in steps:
+        acc.append(acc[-1] + x)
+    pairs = []
+    for i, start in enumerate(acc):
+        best, best_res = None, 0.2 * d
+        for j in range(i, len(acc)):
+            if abs(acc[j] - (start + d)) < best_res:
+                best, best_res = j, abs(acc[j] - (start + d))
+        if best is not None:
+            pairs.append((i, best))
+    return pairs if len(pairs) >= 2 else []
+
+
 BRUTE = {"evo": _brute_evo_consecutive, "evo_all_pairs": _brute_evo_all_pairs,
-         "every_pose": _brute_every_pose}
+         "every_pose": _brute_every_pose, "rpg": _brute_rpg}
 
 
 @pytest.mark.parametrize("pairing", RPE_PAIRINGS)
@@ -91,7 +112,7 @@ def test_rpe_pairs_and_errors_match_a_brute_force_of_the_rule(pairing, d, pairs_
     ref = _wander()
     est = _noisy(ref)
     # Whose path picks the pairs: evo's default is the estimate, every_pose's the reference.
-    by = pairs_from or ("reference" if pairing == "every_pose" else "estimate")
+    by = pairs_from or ("reference" if pairing in ("every_pose", "rpg") else "estimate")
     expected = BRUTE[pairing]((ref if by == "reference" else est).translations, d)
     assert len(expected) > 5
     (res,) = relative_pose_error(est, ref, [d], pairing=pairing, pairs_from=pairs_from)

@@ -41,7 +41,7 @@ def test_processing_settings_fields_are_literals_of_the_accepted_names():
         assert set(typing.get_args(hints[field])) == set(names), field
         with pytest.raises(ValueError, match=field):
             dsp.ProcessingSettings(**{field: "nonsense"})
-    assert set(ALIGNMENTS) == {"se3", "sim3", "origin", "none"}
+    assert set(ALIGNMENTS) == {"se3", "sim3", "posyaw", "origin", "none"}
     assert set(ORIENTATION_SOURCES) == {"imu", "groundtruth"}
 
 

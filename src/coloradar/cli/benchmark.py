@@ -45,7 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "each estimate against the ground truth the same way, and write one "
                     "table: per run and overall ATE (m and % of the distance), final-position "
                     "error %, KITTI-style translation drift (%) and rotation drift (deg/m), "
-                    "ego-velocity RMSE and frames/s. Your own method joins the table as a "
+                    "ego-velocity RMSE and frames/s; the CSV and JSON also hold the RIO "
+                    "literature's ATE after position + yaw alignment and relative errors over "
+                    "25, 50, 75 and 100 m (rpg_trajectory_evaluation). Your own method joins the table as a "
                     "folder of TUM files (--estimate) or a Python function (--method). Output: "
                     "DIR/benchmark.txt, .csv, .json and DIR/<method>/<run>/ (estimate, "
                     "evaluation, groundtruth.txt for evo). A rerun with the same settings "
@@ -90,7 +92,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "parses, else text); repeatable")
     e = p.add_argument_group("evaluation")
     e.add_argument("--align", choices=ALIGNMENTS, default="se3",
-                   help="alignment before the ATE (default se3: Umeyama)")
+                   help="alignment before the ATE (default se3: Umeyama; posyaw: position + "
+                        "yaw, in the CSV's ate_posyaw_* columns anyway)")
     e.add_argument("--drift-lengths", type=positive_float, nargs="+", default=list(DRIFT_LENGTHS),
                    metavar="M", help=f"segment lengths of the drift in metres (default "
                    f"{lengths})")

@@ -19,7 +19,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Read DIR/trajectory.txt (TUM) and DIR/ego_velocity.csv written by "
                     "'coloradar odometry', and report the ego-velocity error against the "
                     "ground-truth radar velocity, the ATE after alignment and the RPE over "
-                    "fixed distances, the position error at the end and the KITTI-style drift. "
+                    "fixed distances, the position error at the end and the KITTI-style drift, "
+                    "and the RIO literature's figures (rpg_trajectory_evaluation): the ATE "
+                    "after position + yaw alignment and the relative error over 25, 50, 75 and "
+                    "100 m. "
                     "Writes DIR/evaluation.txt, DIR/evaluation.json, DIR/groundtruth.txt (the "
                     "ground truth at the estimate's timestamps, TUM, for evo) and "
                     "DIR/evaluation.png (with matplotlib).")
@@ -29,12 +32,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="evaluate against --run even when odometry.json names another run")
     p.add_argument("--calib", help="calib folder or calib.zip (default: the odometry's)")
     p.add_argument("--align", choices=ALIGNMENTS, default="se3",
-                   help="trajectory alignment before the ATE (default se3: Umeyama)")
+                   help="trajectory alignment before the ATE (default se3: Umeyama; posyaw: "
+                        "position + yaw, the 4-DoF alignment of visual/radar-inertial "
+                        "odometry, always reported too)")
     p.add_argument("--distances", type=positive_float, nargs="+", default=[1.0, 2.0, 5.0],
                    metavar="M", help="RPE segment lengths in metres (default 1 2 5)")
     p.add_argument("--rpe-pairing", choices=RPE_PAIRINGS, default="every_pose",
                    help="RPE pose pairs: every_pose (default: a pair from every pose), evo "
-                        "(evo_rpe -u m: consecutive segments) or evo_all_pairs (--all_pairs)")
+                        "(evo_rpe -u m: consecutive segments), evo_all_pairs (--all_pairs) or "
+                        "rpg (rpg_trajectory_evaluation: nearest d within 20 %%)")
     p.add_argument("--drift-lengths", type=positive_float, nargs="+", default=list(DRIFT_LENGTHS),
                    metavar="M", help="segment lengths of the KITTI-style drift in metres "
                    f"(default {' '.join(f'{x:g}' for x in DRIFT_LENGTHS)})")

@@ -9,14 +9,16 @@
 - :func:`run_odometry`, :func:`evaluate_odometry`: the ``coloradar odometry`` and
   ``coloradar evaluate`` commands as functions; :func:`ego_velocity_report` for summaries.
 - :func:`absolute_trajectory_error`, :func:`relative_pose_error`, :func:`velocity_errors`,
-  :func:`umeyama_alignment`: evaluation against ground truth; TUM files for ``evo``. The
+  :func:`umeyama_alignment`: evaluation against ground truth; TUM files for ``evo``;
+  :func:`posyaw_alignment` and :func:`rpg_relative_error`: the radar-inertial literature's
+  protocol (rpg_trajectory_evaluation). The
   error records, :class:`Evaluation` among them, live in :mod:`.metrics`, below both
   :mod:`.evaluation` (which computes them) and :mod:`.plot` (which draws them).
 
 See ``docs/odometry.md``.
 """
 
-from .alignment import Alignment, umeyama_alignment
+from .alignment import Alignment, posyaw_alignment, umeyama_alignment
 from .dead_reckoning import (
     ORIENTATION_SOURCES,
     cumulative_rotations,
@@ -44,6 +46,7 @@ from .evaluation import (
 )
 from .metrics import (
     RPE_PAIRINGS,
+    RPG_LENGTHS,
     ATEResult,
     RPEPairing,
     RPEResult,
@@ -54,6 +57,7 @@ from .metrics import (
     path_length,
     relative_pose_error,
     rpe_pairs,
+    rpg_relative_error,
     velocity_errors,
 )
 from .pipeline import (
@@ -84,6 +88,7 @@ __all__ = [
     "EVALUATION_FILES",
     "ORIENTATION_SOURCES",
     "RPE_PAIRINGS",
+    "RPG_LENGTHS",
     "SOURCES",
     "ATEResult",
     "Alignment",
@@ -123,6 +128,7 @@ __all__ = [
     "parse_tum",
     "parse_velocity_table",
     "path_length",
+    "posyaw_alignment",
     "radar_inertial_odometry",
     "read_tum",
     "read_velocity_table",
@@ -130,6 +136,7 @@ __all__ = [
     "rio_odometry",
     "rio_summary",
     "rpe_pairs",
+    "rpg_relative_error",
     "run_ego_velocity",
     "run_odometry",
     "static_inlier_threshold",

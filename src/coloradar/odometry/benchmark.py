@@ -15,6 +15,12 @@ ground truth interpolated at the estimate's timestamps) so that methods compare 
   :func:`function_methods`): a higher layer's estimator (SLAM) added as a method without this
   module knowing it; ``settings`` are the benchmark's odometry options.
 
+Beside the project's figures, every row carries the RIO literature's (rpg_trajectory_evaluation,
+as x_rio, DeRO and 4DRadarSLAM report them): the ATE after position + yaw alignment
+(``ate_posyaw_*``) and the mean relative translation error [% of d] and yaw error [deg] over
+25, 50, 75 and 100 m (``re<d>_percent``, ``re<d>_yaw_deg``; empty where the run is shorter;
+the summary row pools every segment of every run, as rpg's ``overall_odometry_errors`` does).
+
 The filter's rows carry its **consistency**: the mean NEES per degree of freedom of the base
 position and attitude against the ground truth (``nees_position``, ``nees_attitude``; 1 for a
 consistent filter), from the per-pose covariance of ``odometry.json``.
@@ -62,7 +68,7 @@ from ..formats.atomic import atomic_write_text, make_output_dir
 from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .evaluation import evaluate_trajectory, evaluation_dict, write_evaluation
-from .metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS
+from .metrics import ALIGNMENTS, DRIFT_LENGTHS, RPE_PAIRINGS, RPG_LENGTHS
 from .pipeline import TRAJECTORY_FILE, VELOCITY_FILE, OdometryJob, run_odometry
 from .tum import read_tum, write_tum
 from .velocity_track import EgoVelocityTrack, read_velocity_table, write_velocity_table
@@ -87,11 +93,16 @@ SETTINGS_FILE = "benchmark_settings.json"
 ROW_FILE = "row.json"
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
 
-#: Columns of the CSV file, in order (``run`` is ``overall`` on a method's summary row).
+#: Columns of the CSV file, in order (``run`` is ``overall`` on a method's summary row); the
+#: RIO literature's figures (posyaw ATE, rpg relative errors) come last.
 CSV_COLUMNS = ("run", "method", "status", "ate_rmse_m", "ate_rmse_percent", "final_error_m",
                "final_error_percent", "drift_percent", "rotation_drift_deg_per_m",
                "ego_velocity_rmse_m_s", "frames_per_s", "real_time_factor", "poses",
-               "path_length_m", "estimator_s", "nees_position", "nees_attitude", "error")
+               "path_length_m", "estimator_s", "nees_position", "nees_attitude", "error",
+               "ate_posyaw_m", "ate_posyaw_percent",
+               "re25_percent", "re25_yaw_deg", "re50_percent", "re50_yaw_deg",
+               "re75_percent", "re75_yaw_deg", "re100_percent", "re100_yaw_deg")
+_RE_COLUMNS = {d: (f"re{d:g}_percent", f"re{d:g}_yaw_deg") for d in RPG_LENGTHS}
 
 
 @dataclass(frozen=True)
@@ -365,9 +376,39 @@ def run_task(task: _Task) -> dict:
         "velocity_frames": int(vel.timestamps.size) if vel is not None else 0,
         "velocity_sq_sum": float(np.sum(vel.errors ** 2)) if vel is not None else 0.0,
         "rpe": d["rpe"],
+        "ate_posyaw_m": d["ate_posyaw"]["rmse_m"],
+        "ate_posyaw_percent": d["ate_posyaw"]["rmse_percent_of_path"],
+        **_re_cells(d["rpg_relative"]),
+        "rpg_relative": d["rpg_relative"],
     }
     atomic_write_text(folder / ROW_FILE, json.dumps(row, indent=2) + "\n")
     return row
+
+
+def _re_cells(rpg: list[dict]) -> dict[str, float | None]:
+    """The ``re<d>_percent`` and ``re<d>_yaw_deg`` cells (means; None without pairs) from
+    :func:`~coloradar.odometry.evaluation_dict`'s ``rpg_relative``."""
+    out: dict[str, float | None] = {}
+    for e in rpg:
+        if e["distance_m"] in _RE_COLUMNS:
+            pct, yaw = _RE_COLUMNS[e["distance_m"]]
+            out[pct], out[yaw] = e["translation_percent_mean"], e["yaw_deg_mean"]
+    return out
+
+
+def _pooled_re(ok: list[dict]) -> dict[str, float | None]:
+    """Summary ``re<d>_*`` cells: means over every segment of every run (rpg's
+    ``overall_odometry_errors`` pools the errors of all datasets); rows written before these
+    figures existed have no ``rpg_relative`` and count for nothing."""
+    out: dict[str, float | None] = {}
+    for d, (pct, yaw) in _RE_COLUMNS.items():
+        entries = [e for r in ok for e in r.get("rpg_relative") or []
+                   if e["distance_m"] == d and e["pairs"]]
+        n = sum(e["pairs"] for e in entries)
+        out[pct] = sum(e["pairs"] * e["translation_percent_mean"] for e in entries) / n \
+            if n else None
+        out[yaw] = sum(e["pairs"] * e["yaw_deg_mean"] for e in entries) / n if n else None
+    return out
 
 
 def _failed_row(method: str, run: str, error: str) -> dict:
@@ -375,8 +416,9 @@ def _failed_row(method: str, run: str, error: str) -> dict:
 
 
 def _summary(method: str, rows: list[dict], n_runs: int) -> dict:
-    """The method's overall row: means of per-run ATE and final error, drift pooled over all
-    segments of all runs (KITTI), ego-velocity RMSE over all frames, poses / estimator time."""
+    """The method's overall row: means of per-run ATE (both alignments) and final error, drift
+    pooled over all segments of all runs (KITTI), the rpg relative errors pooled likewise,
+    ego-velocity RMSE over all frames, poses / estimator time."""
     ok = [r for r in rows if r["status"] == "ok"]
 
     def mean(key: str) -> float | None:
@@ -406,6 +448,8 @@ def _summary(method: str, rows: list[dict], n_runs: int) -> dict:
         "estimator_s": secs if timed else None,
         "nees_position": mean("nees_position"), "nees_attitude": mean("nees_attitude"),
         "error": "",
+        "ate_posyaw_m": mean("ate_posyaw_m"), "ate_posyaw_percent": mean("ate_posyaw_percent"),
+        **_pooled_re(ok),
     }
 
 
@@ -417,7 +461,7 @@ class BenchmarkResult:
     ----------
     rows
         One dict per (run, method), in run then method order (keys :data:`CSV_COLUMNS`, and
-        ``rpe`` per length).
+        ``rpe`` and ``rpg_relative`` per length).
     overall
         One summary dict per method (``run == "overall"``).
     settings

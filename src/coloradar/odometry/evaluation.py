@@ -5,7 +5,9 @@ folder written by :func:`~coloradar.odometry.run_odometry` (or any TUM trajector
 base frame), opens the run named in ``odometry.json`` (or the one given), and computes the
 ego-velocity error (against the ground-truth velocity of the radar origin in the radar frame,
 :func:`~coloradar.geometry.rig_velocity`), the ATE after alignment, the position error at the
-end, the RPE over fixed distances and the KITTI-style drift (:mod:`.metrics`).
+end, the RPE over fixed distances and the KITTI-style drift (:mod:`.metrics`), and the RIO
+literature's figures: the ATE after position + yaw alignment and the relative error over 25,
+50, 75 and 100 m as rpg_trajectory_evaluation computes them.
 :func:`write_evaluation` writes ``evaluation.json``, ``evaluation.txt`` (the printed table),
 ``groundtruth.txt`` (the ground truth interpolated at the estimate's timestamps, TUM, so that
 ``evo`` associates every pose) and, with matplotlib installed, ``evaluation.png``.
@@ -25,12 +27,16 @@ from ..formats.source import read_file_text
 from ..geometry import Trajectory, trajectory_from_groundtruth
 from .metrics import (
     DRIFT_LENGTHS,
+    RPG_LENGTHS,
     Align,
+    ATEResult,
     Evaluation,
     RPEPairing,
+    RPEResult,
     absolute_trajectory_error,
     final_position_error,
     relative_pose_error,
+    rpg_relative_error,
     trajectory_drift,
     velocity_errors,
 )
@@ -57,7 +63,12 @@ def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
                         max_gap: float | None = 1.0, info: dict | None = None,
                         rpe_pairing: RPEPairing = "every_pose",
                         drift_lengths: tuple[float, ...] = DRIFT_LENGTHS) -> Evaluation:
-    """ATE, final error, RPE, drift and (with ``track`` and ``calib``) ego-velocity errors.
+    """ATE, final error, RPE, drift, the RIO literature's figures and (with ``track`` and
+    ``calib``) ego-velocity errors.
+
+    The RIO literature's figures are the ATE after ``posyaw`` alignment and the relative error
+    over :data:`~coloradar.odometry.metrics.RPG_LENGTHS` as rpg_trajectory_evaluation computes
+    it (:func:`~coloradar.odometry.metrics.rpg_relative_error`).
 
     Parameters
     ----------
@@ -84,13 +95,16 @@ def evaluate_trajectory(estimate: Trajectory, reference: Trajectory, *,
     rpe = relative_pose_error(estimate, reference, distances, max_gap=max_gap,
                               pairing=rpe_pairing)
     drift = trajectory_drift(estimate, reference, drift_lengths, max_gap=max_gap)
+    posyaw = ate if align == "posyaw" else absolute_trajectory_error(
+        estimate, reference, align="posyaw", max_gap=max_gap)
+    rpg = rpg_relative_error(estimate, reference, RPG_LENGTHS, max_gap=max_gap)
     vel = None
     if track is not None and calib is not None:
         vel = velocity_errors(track, reference, calib)
     meta = {"align": align, "distances": [float(d) for d in distances],
             "rpe_pairing": rpe_pairing, "drift_lengths": [float(d) for d in drift_lengths],
-            **(info or {})}
-    return Evaluation(estimate, reference, ate, rpe, vel, track, meta, drift, final)
+            "rpg_lengths": list(RPG_LENGTHS), **(info or {})}
+    return Evaluation(estimate, reference, ate, rpe, vel, track, meta, drift, final, posyaw, rpg)
 
 
 def _calib_for(info: dict, calib):
@@ -168,15 +182,31 @@ def _f(x: float) -> float | None:
     return None if x is None or not np.isfinite(x) else float(x)
 
 
+def _ate_dict(a: ATEResult, align: str) -> dict:
+    return {"align": align, "poses": int(a.errors.size),
+            "rmse_m": _f(a.rmse), "mean_m": _f(a.mean), "median_m": _f(a.median),
+            "std_m": _f(a.std), "max_m": _f(a.max), "rotation_rmse_deg": _f(a.rotation_rmse),
+            "path_length_m": _f(a.path_length), "rmse_percent_of_path": _f(a.rmse_percent),
+            "scale": _f(a.alignment.scale)}
+
+
+def _rpg_dict(r: RPEResult) -> dict:
+    """One length of the rpg relative error: pairs and rpg's statistics (null without pairs)."""
+    st = r.statistics()
+    return {"distance_m": r.distance, "pairs": r.pairs,
+            **{f"{k}_{s}": _f(v) for k, stats in st.items() for s, v in stats.items()}}
+
+
 def evaluation_dict(ev: Evaluation) -> dict:
-    """The evaluation's figures as a JSON-compatible dict (NaN written as null)."""
-    a = ev.ate
-    out: dict = {"info": ev.info, "ate": {
-        "align": ev.info.get("align", "se3"), "poses": int(a.errors.size),
-        "rmse_m": _f(a.rmse), "mean_m": _f(a.mean), "median_m": _f(a.median),
-        "std_m": _f(a.std), "max_m": _f(a.max), "rotation_rmse_deg": _f(a.rotation_rmse),
-        "path_length_m": _f(a.path_length), "rmse_percent_of_path": _f(a.rmse_percent),
-        "scale": _f(a.alignment.scale)}}
+    """The evaluation's figures as a JSON-compatible dict (NaN written as null).
+
+    ``ate_posyaw`` (the ATE after position + yaw alignment, keys as ``ate``) and
+    ``rpg_relative`` (one entry per length: ``distance_m``, ``pairs``, and
+    ``translation_percent_*`` [%], ``yaw_deg_*`` [deg] for ``rmse``, ``mean``, ``median``,
+    ``std``, ``min``, ``max``: rpg_trajectory_evaluation's ``rel_trans_perc`` and ``rel_yaw``
+    statistics) are the RIO literature's figures.
+    """
+    out: dict = {"info": ev.info, "ate": _ate_dict(ev.ate, ev.info.get("align", "se3"))}
     out["rpe"] = [{"distance_m": r.distance, "pairs": r.pairs,
                    "translation_percent": _f(r.translation_percent),
                    "rotation_deg_per_m": _f(r.rotation_deg_per_m),
@@ -189,6 +219,10 @@ def evaluation_dict(ev: Evaluation) -> dict:
         out["drift"] = {"lengths_m": list(ev.drift.lengths), "segments": ev.drift.pairs,
                         "translation_percent": _f(ev.drift.translation_percent),
                         "rotation_deg_per_m": _f(ev.drift.rotation_deg_per_m)}
+    if ev.ate_posyaw is not None:
+        out["ate_posyaw"] = _ate_dict(ev.ate_posyaw, "posyaw")
+    if ev.rpg_relative is not None:
+        out["rpg_relative"] = [_rpg_dict(r) for r in ev.rpg_relative]
     if ev.velocity is not None:
         v = ev.velocity
         out["ego_velocity"] = {
@@ -234,6 +268,11 @@ def format_evaluation(ev: Evaluation) -> str:
                  f"(mean {a.mean:.3f}, median {a.median:.3f}, max {a.max:.3f} m; "
                  f"{a.errors.size} poses)"))
     rows.append(("ATE rotation RMSE", f"{a.rotation_rmse:.2f} deg"))
+    if ev.ate_posyaw is not None and al != "posyaw":
+        p = ev.ate_posyaw
+        rows.append(("ATE RMSE (posyaw)",
+                     f"{p.rmse:.3f} m = {p.rmse_percent:.2f} % of {p.path_length:.1f} m  "
+                     f"(mean {p.mean:.3f}, median {p.median:.3f}, max {p.max:.3f} m)"))
     if ev.final is not None:
         rows.append(("final position error", f"{ev.final.error:.3f} m = {ev.final.percent:.2f} % "
                      "of the distance (first poses coincide)"))
@@ -251,7 +290,28 @@ def format_evaluation(ev: Evaluation) -> str:
         lines.append(f"{r.distance:>8.1f} m {r.pairs:>7d} {r.translation_percent:>10.2f} "
                      f"{r.rotation_deg_per_m:>12.3f} {r.translation_rmse:>15.3f} "
                      f"{r.rotation_rmse:>15.2f}")
+    if ev.rpg_relative:
+        lines += ["", *_format_rpg(ev.rpg_relative, ev.ate.path_length)]
     return "\n".join(lines) + "\n"
+
+
+def _format_rpg(results: list[RPEResult], path: float) -> list[str]:
+    """The relative-error table of rpg_trajectory_evaluation: mean, median, RMSE of the
+    translation error [% of d] and of the yaw error [deg] per length; n/a without pairs (one
+    line when no length has any)."""
+    if not any(r.pairs for r in results):
+        lengths = ", ".join(f"{r.distance:g}" for r in results)
+        return [f"RE (rpg) over {lengths} m: n/a (no pose pairs on {path:.1f} m of path)"]
+    out = [f"{'RE (rpg) over':>13} {'pairs':>7} {'trans mean [%]':>15} {'median':>7} "
+           f"{'RMSE':>7} {'yaw mean [deg]':>15} {'median':>7} {'RMSE':>7}"]
+    for r in results:
+        st = r.statistics()
+        cells = [st[k][s] for k in ("translation_percent", "yaw_deg")
+                 for s in ("mean", "median", "rmse")]
+        c = ["n/a" if not np.isfinite(x) else f"{x:.2f}" for x in cells]
+        out.append(f"{r.distance:>11g} m {r.pairs:>7d} {c[0]:>15} {c[1]:>7} {c[2]:>7} "
+                   f"{c[3]:>15} {c[4]:>7} {c[5]:>7}")
+    return out
 
 
 def write_evaluation(ev: Evaluation, folder: str | os.PathLike[str], *, plot: bool = True,

@@ -12,8 +12,9 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
   ``R_ref,iᵀ R_a R_est,i`` where ``R_a`` is the chordal mean of ``R_ref,i R_est,iᵀ`` (the
   rotation that best aligns the orientations): the positions of a nearly straight corridor
   walk leave the roll about the path undetermined, and Umeyama's rotation would then show up
-  as a large, meaningless attitude error. With ``origin`` or ``none`` alignment ``R_a`` is that
-  alignment's rotation.
+  as a large, meaningless attitude error. With ``posyaw`` (position and yaw, the 4-DoF
+  alignment of visual/radar-inertial odometry: :func:`~.alignment.posyaw_alignment`),
+  ``origin`` or ``none`` alignment ``R_a`` is that alignment's rotation.
 - **RPE** over distance ``d``: the error of the relative motion of a pose pair ``(i, j)`` is
   ``E = (ref_i⁻¹ ref_j)⁻¹ (est_i⁻¹ est_j)``. Translation error in percent is ``100 · |t_E| / d``
   and rotation error ``angle(E) / d`` in deg/m, averaged over the pairs (the KITTI devkit's
@@ -31,6 +32,16 @@ Conventions follow the KITTI odometry benchmark (Geiger et al., CVPR 2012) and `
   * ``"evo_all_pairs"``: ``evo_rpe … --all_pairs``: every pose ``i`` whose best partner ``j``
     (``L_j − L_i`` nearest to ``d``, the earlier pose on a tie) lies within the relative
     tolerance: ``|L_j − L_i − d| ≤ tolerance · d`` (evo's default tolerance is 0.1).
+  * ``"rpg"``: ``rpg_trajectory_evaluation``'s rule (``compute_comparison_indices_length``,
+    Zhang & Scaramuzza, IROS 2018): the same nearest partner along the *reference*, kept when
+    ``|L_j − L_i − d| < tolerance · d`` with its tolerance 0.2 (``max_dist_diff``); with fewer
+    than two such pairs a length gives none ("too few samples").
+- **RPE yaw error** (every pairing; :attr:`RPEResult.yaw_errors`): rpg's ``rel_yaw``,
+  ``|yaw|`` (the z angle of a z-y-x Euler decomposition) of the error rotation expressed in
+  world axes through the estimate's attitude at the pair's end, ``R_est,j R_E R_est,jᵀ``.
+- **The RIO literature's protocol** (:func:`rpg_relative_error`): RPE with ``"rpg"`` pairs over
+  :data:`RPG_LENGTHS` (25, 50, 75, 100 m), ``100 |t_E| / d`` [%] and the yaw error [deg],
+  summarised by :meth:`RPEResult.statistics`, beside the ``posyaw`` ATE.
 - **Drift** (:func:`trajectory_drift`): RPE with ``every_pose`` pairs over several lengths
   (:data:`DRIFT_LENGTHS`), ``|t_E|/L`` and ``angle(E)/L`` averaged over all segments of all
   lengths together, as the KITTI devkit averages.
@@ -49,12 +60,13 @@ from scipy.spatial.transform import Rotation
 from ..calib import Calibration
 from ..errors import ColoradarError, SettingsError
 from ..geometry import Trajectory, rig_velocity
-from .alignment import Alignment, umeyama_alignment
+from .alignment import Alignment, posyaw_alignment, umeyama_alignment
 from .velocity_track import EgoVelocityTrack
 
 __all__ = [
     "DRIFT_LENGTHS",
     "RPE_PAIRINGS",
+    "RPG_LENGTHS",
     "ATEResult",
     "DriftResult",
     "Evaluation",
@@ -69,14 +81,15 @@ __all__ = [
     "path_length",
     "relative_pose_error",
     "rpe_pairs",
+    "rpg_relative_error",
     "trajectory_drift",
     "velocity_errors",
 ]
 
-Align = Literal["se3", "sim3", "origin", "none"]
+Align = Literal["se3", "sim3", "posyaw", "origin", "none"]
 ALIGNMENTS: tuple[Align, ...] = get_args(Align)
 
-RPEPairing = Literal["every_pose", "evo", "evo_all_pairs"]
+RPEPairing = Literal["every_pose", "evo", "evo_all_pairs", "rpg"]
 """How :func:`relative_pose_error` pairs poses (see the module docstring)."""
 RPE_PAIRINGS: tuple[RPEPairing, ...] = get_args(RPEPairing)
 
@@ -194,8 +207,9 @@ def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
         ``world_T_body(t)`` of the same body (e.g. both the rig's base frame).
     align
         ``"se3"`` (Umeyama rotation + translation, the default), ``"sim3"`` (with scale),
-        ``"origin"`` (make the first associated poses coincide, evo's ``--align_origin``), or
-        ``"none"``.
+        ``"posyaw"`` (a rotation about world z + translation, the 4-DoF alignment of
+        visual/radar-inertial odometry, :func:`~.alignment.posyaw_alignment`), ``"origin"``
+        (make the first associated poses coincide, evo's ``--align_origin``), or ``"none"``.
     max_gap
         See :func:`associate_trajectories`.
 
@@ -208,6 +222,8 @@ def absolute_trajectory_error(estimate: Trajectory, reference: Trajectory, *,
     est, ref = associate_trajectories(estimate, reference, max_gap)
     if align in ("se3", "sim3"):
         al = umeyama_alignment(est.translations, ref.translations, with_scale=align == "sim3")
+    elif align == "posyaw":
+        al = posyaw_alignment(est.translations, ref.translations)
     elif align == "origin":
         rot = ref.rotations[0] * est.rotations[0].inv()
         # A copy: Trajectory arrays are read-only, and SciPy's Rotation.apply (Cython memory
@@ -247,6 +263,9 @@ class RPEResult:
         float64 ``(K,)`` [deg]: ``angle(E)``.
     pairing
         How the pairs were chosen (:data:`RPEPairing`).
+    yaw_errors
+        float64 ``(K,)`` [deg]: ``|yaw|`` of ``E`` in world axes (rpg_trajectory_evaluation's
+        ``rel_yaw``, see the module docstring); None when not computed.
     """
 
     distance: float
@@ -255,6 +274,7 @@ class RPEResult:
     translation_errors: np.ndarray
     rotation_errors: np.ndarray
     pairing: RPEPairing = "every_pose"
+    yaw_errors: np.ndarray | None = None
 
     @property
     def pairs(self) -> int:
@@ -285,6 +305,29 @@ class RPEResult:
         e = self.rotation_errors
         return float(np.sqrt(np.mean(e * e))) if self.pairs else float("nan")
 
+    def statistics(self) -> dict[str, dict[str, float]]:
+        """rpg_trajectory_evaluation's statistics of this length's errors.
+
+        Returns
+        -------
+        dict
+            ``"translation_percent"`` (``100 |t_E| / d`` [%], rpg's ``rel_trans_perc``) and
+            ``"yaw_deg"`` (:attr:`yaw_errors` [deg], rpg's ``rel_yaw``), each a dict of
+            ``rmse``, ``mean``, ``median``, ``std``, ``min``, ``max`` over the pairs (rpg's
+            ``compute_statistics``); NaN without pairs (or without yaw errors).
+        """
+        yaw = self.yaw_errors if self.yaw_errors is not None else np.zeros(0)
+        return {"translation_percent": _stats_or_nan(100.0 * self.translation_errors
+                                                     / self.distance),
+                "yaw_deg": _stats_or_nan(yaw)}
+
+
+def _stats_or_nan(e: np.ndarray) -> dict[str, float]:
+    """:func:`_stats` and the minimum; NaN for every figure of an empty array."""
+    if not e.size:
+        return dict.fromkeys(("rmse", "mean", "median", "std", "min", "max"), float("nan"))
+    return {**_stats(e), "min": float(np.min(e))}
+
 
 def _relative(traj: Trajectory, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, Rotation]:
     """``traj_i⁻¹ traj_j`` for index pairs: translations ``(K, 3)`` and rotations."""
@@ -293,7 +336,7 @@ def _relative(traj: Trajectory, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarra
 
 
 def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_pose", *,
-              tolerance: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+              tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Index pairs ``(i, j)`` of poses about ``distance`` apart along a path.
 
     Parameters
@@ -304,9 +347,11 @@ def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_po
     distance
         ``d`` [m], positive.
     pairing
-        ``"every_pose"``, ``"evo"`` or ``"evo_all_pairs"`` (see the module docstring).
+        ``"every_pose"``, ``"evo"``, ``"evo_all_pairs"`` or ``"rpg"`` (see the module
+        docstring).
     tolerance
-        Relative tolerance of ``"evo_all_pairs"``.
+        Relative tolerance of ``"evo_all_pairs"`` (default 0.1, evo's) and ``"rpg"`` (default
+        0.2, rpg_trajectory_evaluation's).
 
     Returns
     -------
@@ -340,25 +385,31 @@ def rpe_pairs(path: np.ndarray, distance: float, pairing: RPEPairing = "every_po
             k = int(np.searchsorted(dist, dist[k] + d - slack, side="left"))
         e = np.asarray(ends, dtype=np.int64)
         return e[:-1], e[1:]
-    if not 0 <= tolerance < 1:
+    tol = (0.2 if pairing == "rpg" else 0.1) if tolerance is None else float(tolerance)
+    if not 0 <= tol < 1:
         raise SettingsError(f"tolerance must lie in [0, 1), got {tolerance!r}")
+    none = np.zeros(0, np.int64), np.zeros(0, np.int64)
     if n == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return none
     target = dist + d
     above = np.minimum(np.searchsorted(dist, target, side="left"), n - 1)  # first >= target
     below = np.maximum(above - 1, 0)
     j = np.where(np.abs(dist[above] - target) < np.abs(dist[below] - target), above, below)
     # On a standstill (equal path lengths) the earliest pose of the run of equals.
     j = np.searchsorted(dist, dist[j], side="left")
-    ok = (np.abs(dist[j] - target) <= tolerance * d + slack) & (j > np.arange(n))
-    i = np.flatnonzero(ok)
+    off = np.abs(dist[j] - target)
+    # evo keeps |…| <= tol·d, rpg |…| < tol·d.
+    near = off <= tol * d + slack if pairing == "evo_all_pairs" else off < tol * d
+    i = np.flatnonzero(near & (j > np.arange(n)))
+    if pairing == "rpg" and i.size < 2:
+        return none      # rpg: "Too few samples! Will not compute."
     return i.astype(np.int64), j[i].astype(np.int64)
 
 
 def relative_pose_error(estimate: Trajectory, reference: Trajectory,
                         distances: tuple[float, ...] | list[float] = (1.0, 2.0, 5.0), *,
                         max_gap: float | None = 1.0, pairing: RPEPairing = "every_pose",
-                        tolerance: float = 0.1,
+                        tolerance: float | None = None,
                         pairs_from: Literal["reference", "estimate"] | None = None
                         ) -> list[RPEResult]:
     """RPE over fixed travelled distances (KITTI / evo convention, see the module docstring).
@@ -372,13 +423,15 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
     max_gap
         See :func:`associate_trajectories`.
     pairing
-        ``"every_pose"`` (default), ``"evo"`` (the pairs of ``evo_rpe -d D -u m``) or
-        ``"evo_all_pairs"`` (``evo_rpe -d D -u m --all_pairs``); see :func:`rpe_pairs`.
+        ``"every_pose"`` (default), ``"evo"`` (the pairs of ``evo_rpe -d D -u m``),
+        ``"evo_all_pairs"`` (``evo_rpe -d D -u m --all_pairs``) or ``"rpg"``
+        (rpg_trajectory_evaluation's); see :func:`rpe_pairs`.
     tolerance
-        Relative path-length tolerance of ``"evo_all_pairs"`` (evo's default 0.1).
+        Relative path-length tolerance of ``"evo_all_pairs"`` (None: evo's 0.1) and ``"rpg"``
+        (None: rpg's 0.2).
     pairs_from
-        Whose path length picks the pairs; None: the reference for ``"every_pose"``, the
-        estimate for the evo pairings (evo's default; ``"reference"`` is evo's
+        Whose path length picks the pairs; None: the reference for ``"every_pose"`` and
+        ``"rpg"``, the estimate for the evo pairings (evo's default; ``"reference"`` is evo's
         ``--pairs_from_reference``).
 
     Returns
@@ -388,7 +441,7 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
     """
     est, ref = associate_trajectories(estimate, reference, max_gap)
     if pairs_from is None:
-        pairs_from = "reference" if pairing == "every_pose" else "estimate"
+        pairs_from = "reference" if pairing in ("every_pose", "rpg") else "estimate"
     if pairs_from not in ("reference", "estimate"):
         raise SettingsError(f"pairs_from must be 'reference' or 'estimate', got {pairs_from!r}")
     dist = path_length((ref if pairs_from == "reference" else est).translations)
@@ -400,12 +453,53 @@ def relative_pose_error(estimate: Trajectory, reference: Trajectory,
             tr, rr = _relative(ref, i, j)
             rr_inv = rr.inv()
             err_t = np.linalg.norm(rr_inv.apply(te - tr), axis=1)
-            err_r = np.degrees((rr_inv * re).magnitude())
+            err = rr_inv * re
+            err_r = np.degrees(err.magnitude())
+            # rpg: the error in world axes through the estimate's attitude at j; its z-y-x
+            # Euler yaw is atan2(m10, m00).
+            m = (est.rotations[j] * err * est.rotations[j].inv()).as_matrix()
+            err_yaw = np.degrees(np.abs(np.arctan2(m[:, 1, 0], m[:, 0, 0])))
         else:   # no pair (a run shorter than d); SciPy 1.11 cannot make an empty Rotation
-            err_t = err_r = np.zeros(0)
+            err_t = err_r = err_yaw = np.zeros(0)
         out.append(RPEResult(float(d), est.timestamps[i], est.timestamps[j], err_t, err_r,
-                             pairing))
+                             pairing, err_yaw))
     return out
+
+
+RPG_LENGTHS: tuple[float, ...] = (25.0, 50.0, 75.0, 100.0)
+"""Segment lengths [m] of :func:`rpg_relative_error`: those radar-inertial odometry papers
+report (x_rio, DeRO, 4DRadarSLAM, with rpg_trajectory_evaluation)."""
+
+
+def rpg_relative_error(estimate: Trajectory, reference: Trajectory,
+                       lengths: tuple[float, ...] | list[float] = RPG_LENGTHS, *,
+                       max_gap: float | None = 1.0) -> list[RPEResult]:
+    """Relative error over travelled distances as rpg_trajectory_evaluation computes it.
+
+    The protocol of Zhang & Scaramuzza (IROS 2018) that radar-inertial odometry papers use:
+    for every pose ``i``, the pose ``j`` whose distance along the reference from ``i`` is
+    nearest to ``d``, kept within 20 % of ``d`` (``pairing="rpg"`` of :func:`rpe_pairs`);
+    ``E = (ref_i⁻¹ ref_j)⁻¹ (est_i⁻¹ est_j)``; the translation error ``100 |t_E| / d`` [%]
+    and the yaw error (:attr:`RPEResult.yaw_errors`) [deg], whose statistics
+    :meth:`RPEResult.statistics` gives. Relative errors need no alignment (rpg applies only the
+    alignment's scale, 1 for ``posyaw`` and ``se3``).
+
+    Parameters
+    ----------
+    estimate, reference
+        ``world_T_body(t)`` of the same body, z up in both worlds.
+    lengths
+        Segment lengths [m]; default :data:`RPG_LENGTHS`.
+    max_gap
+        See :func:`associate_trajectories`.
+
+    Returns
+    -------
+    list[RPEResult]
+        One per length; a length with fewer than two pairs (a run shorter than about 0.8
+        of it) has none.
+    """
+    return relative_pose_error(estimate, reference, lengths, max_gap=max_gap, pairing="rpg")
 
 
 DRIFT_LENGTHS: tuple[float, ...] = (2.0, 4.0, 6.0, 8.0, 10.0)
@@ -628,6 +722,11 @@ class Evaluation:
         lengths asked for).
     final
         Position error at the end, from the same start (``origin`` alignment).
+    ate_posyaw
+        ATE after ``posyaw`` alignment (the RIO literature's, beside ``ate``).
+    rpg_relative
+        Relative errors over :data:`RPG_LENGTHS` (or the lengths asked for) as
+        rpg_trajectory_evaluation computes them (:func:`rpg_relative_error`).
     """
 
     estimate: Trajectory
@@ -639,3 +738,5 @@ class Evaluation:
     info: dict = field(default_factory=dict)
     drift: DriftResult | None = None
     final: FinalError | None = None
+    ate_posyaw: ATEResult | None = None
+    rpg_relative: list[RPEResult] | None = None
