@@ -17,21 +17,21 @@ left out, with no RANSAC.
 noisy directions, and so the plain stacked update, converges to ``(Σ w(u uᵀ + C))⁻¹ Σ w K u uᵀ y``
 rather than ``y``: the speed shrinks by about ``σ²/2`` and, when the points' elevations are not
 centred on boresight, ``C``'s x–z term leaks a fixed fraction of the forward speed into
-``v_z``. The update therefore uses the corrected normal equations
+``v_z``. The update therefore takes the frame's normal equations as a linear measurement whose
+regressor is their expectation:
 
-    A_c = Σ w_i (u_i u_iᵀ − C_i),    b_c = −Σ w_i K_i⁻¹ u_i ṙ_i,    ŷ_m = A_c⁻¹ b_c
+    b = −Σ w_i u_i ṙ_i = A_e y + n,    A_e = Σ w_i diag(K_i)(u_i u_iᵀ − C_i),
+    cov(n) = M = Σ w_i² σ_i² u_i u_iᵀ
 
 (``C_i``, ``K_i`` evaluated at the observed angles: exact moments of Gaussian angle errors;
-the residual bias is O(σ⁴)), whose solution is unbiased, with covariance
-``A_c⁻¹ M A_c⁻¹`` (``M = Σ w_i² σ_i² u_i u_iᵀ``). Its weights are one per frame
+``E[b] ≈ E[A_e] y`` to first order in the angle variances). Its weights are one per frame
 (``1 / mean σ_i²``): weights computed from the noisy directions correlate with their errors
-and would bias it again (by 0.4 % of the speed at 3°/5° of noise). The stacked scalar update
-is linear in ``δx`` through ``y``, so it equals one update with this compressed measurement (the information
-``H_yᵀ A H_y`` and the information vector are the same); without the correction (``σ`` = 0)
-the two are identical to round-off (``tests/test_odometry_doppler.py`` checks both). The
-compressed update is applied in the eigenbasis of ``A_c``: directions that the points do not
-observe (where the correction takes most of the information away) are left out rather than
-inverted.
+and would bias it again (by 0.4 % of the speed at 3°/5° of noise). Solving the corrected
+equations per frame instead (``A_c⁻¹ b_c``, until issue 42) inverts a noisy matrix and is
+biased on sparse frames; the measurement form inverts nothing and keeps the information the
+noise leaves. Without the correction (``σ`` = 0) it equals the stacked scalar updates of the
+points to round-off (the information ``H_yᵀ A H_y`` and the information vector are the same;
+``tests/test_odometry_doppler.py`` checks it).
 """
 
 from __future__ import annotations
