@@ -201,7 +201,8 @@ def _occupancy_map(args: argparse.Namespace) -> int:
         print(f"{seq.name}: {res.frame_indices.size} {args.sensor} {res.points_from} frames "
               f"placed by {poses_from}; {len(res.map):,} voxels of {settings.voxel:g} m, "
               f"{int(res.map.occupied().shape[0]):,} occupied; {seconds:.1f} s "
-              f"({span / max(seconds, 1e-9):.1f}x real time)")
+              f"({res.frame_indices.size / max(seconds, 1e-9):.0f} frames/s, "
+              f"{span / max(seconds, 1e-9):.1f} s of run per s)")
         print(f"  2-D grid z in [{band[0]:.2f}, {band[1]:.2f}) m: {c['occupied']:,} occupied, "
               f"{c['free']:,} free, {c['unknown']:,} unknown cells")
         for path in written:
