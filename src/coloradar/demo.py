@@ -93,6 +93,9 @@ class LoopDemo:
         Simulation and SLAM [s].
     picture
         ``pictures/slam.png`` (None without pictures).
+    map_picture
+        ``pictures/map.png``: the occupancy map of the walk's frames placed by SLAM
+        (:mod:`coloradar.mapping`), its 2-D grid from above (None without pictures).
     """
 
     laps: float
@@ -106,6 +109,7 @@ class LoopDemo:
     scale: dict
     seconds: float
     picture: Path | None = None
+    map_picture: Path | None = None
 
     def lines(self) -> list[str]:
         sc = self.scale
@@ -354,7 +358,36 @@ def _loop_closure(folder: Path, seed: int, pictures: bool, overwrite: bool) -> t
 
         loop.picture = plot_slam(path, res, run.groundtruth,
                                  title=f"corridor, {LOOP_LAPS} laps (simulated)")
+        loop.map_picture = _map_picture(folder / "map.png", run, res, overwrite)
     return loop, ""
+
+
+def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
+    """``map.png``: the occupancy grid (rig height ± 0.5 m) of every frame of the walk placed
+    by SLAM's trajectory."""
+    from .mapping import (
+        OccupancySettings,
+        frame_evidence,
+        occupancy_from_frames,
+        occupancy_grid,
+        radar_sensor_model,
+    )
+    from .mapping.output import default_band
+    from .viz import save_figure
+    from .viz.occupancy import occupancy_figure
+
+    keep = res.trajectory.covers(run.timestamps)
+    m = res.trajectory.interpolate(run.timestamps[keep]).matrices() @ \
+        run.calib.transforms["single_chip"].matrix()
+    s = OccupancySettings()
+    occ = occupancy_from_frames([c for c, k in zip(run.clouds, keep, strict=True) if k],
+                                m[:, :3, :3], m[:, :3, 3],
+                                frame_evidence(radar_sensor_model(run.calib.single_chip), s), s)
+    grid = occupancy_grid(occ, *default_band(res.trajectory))
+    fig = occupancy_figure(grid, res.trajectory.translations, width=10.0, title=(
+        f"occupancy map of the corridor walk (single chip, SLAM poses), z in "
+        f"[{grid.band[0]:.2f}, {grid.band[1]:.2f}) m"))
+    return save_figure(fig, path, overwrite=overwrite)
 
 
 def run_demo(out: str | os.PathLike[str] = "coloradar_demo", *, scene: str = "corridor",
@@ -422,6 +455,8 @@ def run_demo(out: str | os.PathLike[str] = "coloradar_demo", *, scene: str = "co
         report.loop, report.loop_note = _loop_closure(out / "pictures", seed, pictures, overwrite)
         if report.loop is not None and report.loop.picture is not None:
             report.pictures.append(report.loop.picture)
+        if report.loop is not None and report.loop.map_picture is not None:
+            report.pictures.append(report.loop.map_picture)
     atomic_write_text(out / DEMO_MARKER, "output of `coloradar demo`; a later demo may replace it\n")
     report.total_seconds = time.perf_counter() - t_start
     return report

@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "the odometry's uncertainty, verified by small_gicp registration and "
                     "consistency tests), optimise the pose graph with GTSAM, and write "
                     "DIR/trajectory.txt (TUM, every radar frame), odometry.txt (before), "
-                    "keyframes.csv, loops.csv, map.ply, slam.json and slam.png. Evaluate the "
+                    "keyframes.csv, loops.csv, map.ply (an occupancy map; --map points: the "
+                    "keyframes' points), slam.json and slam.png. Evaluate the "
                     "trajectory with 'coloradar evaluate DIR'. Needs the extra [slam] "
                     "(gtsam, small_gicp).")
     p.add_argument("run", help="run folder or .zip")
@@ -54,6 +55,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="register keyframes whose submaps share no frame and add the results "
                         "as factors: for a radar that resolves elevation (the cascade; "
                         "default), always, or never")
+    p.add_argument("--map", choices=("occupancy", "points"), default="occupancy",
+                   help="map.ply: an occupancy map of every frame along the optimised "
+                        "trajectory (default; with occupancy.npz and the ROS grid grid.pgm + "
+                        "grid.yaml), or the keyframes' points seen from 3 keyframes (the map "
+                        "before the occupancy map)")
     p.add_argument("--score-map", action="store_true",
                    help="score the map against the lidar map built with ground truth (the run "
                         "needs lidar and ground truth); the scores go to slam.json")
@@ -73,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
                        keyframe_angle_deg=args.keyframe_angle,
                        refine_odometry=args.refine_odometry,
                        smooth_frontend=args.smooth_frontend,
-                       disjoint_registration=args.disjoint_registration)
+                       disjoint_registration=args.disjoint_registration, map_kind=args.map)
     check_input(args.run)
     check_output_outside_dataset(args.out, (args.run, args.calib))
     seq = open_sequence(args.run, calib=args.calib)

@@ -10,8 +10,12 @@ The output folder holds
   submap size;
 - ``loops.csv``: every verified loop candidate: the pair, descriptor distance, gate, fitness,
   overlap, RMSE, the odometry test, accepted or not and why;
-- ``map.ply``: the radar map from the optimised poses, filtered (a voxel kept only when
-  ``map_min_keyframes`` keyframes saw it): ``x y z count intensity``;
+- ``map.ply``: the radar map from the optimised poses. By default (``map_kind``
+  ``"occupancy"``) the occupied voxels of an occupancy map of every frame
+  (:mod:`coloradar.mapping`): ``x y z probability hits misses``, with ``occupancy.npz`` (the
+  whole map) and ``grid.pgm`` + ``grid.yaml`` (the ROS ``map_server`` grid of the trajectory's
+  median height ± 0.5 m); with ``map_kind="points"`` the keyframes' points, filtered (a voxel
+  kept only when ``map_min_keyframes`` keyframes saw it): ``x y z count intensity``;
 - ``slam.json``: the run, settings and a summary (and map scores when asked for);
 - ``odometry.json``: the run, radar and source, so that ``coloradar evaluate DIR`` evaluates
   ``trajectory.txt`` as it does an odometry folder;
@@ -36,6 +40,7 @@ from ..errors import ColoradarError, MissingDataError, OutputExistsError, Settin
 from ..formats.atomic import atomic_write_text, make_output_dir
 from ..geometry import build_map, trajectory_from_groundtruth, write_ply
 from ..geometry.cloud_metrics import MapScores, score_map
+from ..mapping.output import PLY_FIELDS
 from ..odometry.ego_velocity import EgoVelocityConfig
 from ..odometry.pipeline import ego_velocity_config, run_path
 from ..odometry.tum import write_tum
@@ -47,8 +52,9 @@ __all__ = ["SLAM_FILES", "SlamOutput", "benchmark_method", "reference_lidar_map"
            "slam_summary"]
 
 SLAM_FILES = ("trajectory.txt", "odometry.txt", "keyframes.csv", "loops.csv", "map.ply",
-              "slam.json", "odometry.json", "slam.png")
-"""The files :func:`run_slam` writes (``slam.png`` only with matplotlib)."""
+              "slam.json", "odometry.json", "slam.png", "occupancy.npz", "grid.pgm", "grid.yaml")
+"""The files :func:`run_slam` writes (``slam.png`` only with matplotlib; the last three only
+with the occupancy map)."""
 
 Progress = Callable[[int, int], None]
 
@@ -149,6 +155,27 @@ def _clouds(stream, convert, idx: np.ndarray) -> Iterator[np.ndarray]:
         yield np.zeros((0, 5), np.float32) if frame is None else convert(frame)
 
 
+def _occupancy(seq, res: SlamResult, radar: str, src: str, s: SlamSettings,
+               targets: dict[str, Path]) -> tuple[np.ndarray, dict, list[Path]]:
+    """The occupancy map of every frame placed by SLAM's trajectory: its occupied voxels, a
+    summary, and ``occupancy.npz``, ``grid.pgm``, ``grid.yaml`` written."""
+    from ..mapping import OccupancyJob, OccupancySettings, build_occupancy_map, occupancy_grid
+    from ..mapping.grid2d import write_map_server
+    from ..mapping.output import default_band
+
+    job = OccupancyJob(sensor=radar, source="heatmaps" if src == "heatmaps" else "points",
+                       max_range=s.max_range)
+    out = build_occupancy_map(seq, res.trajectory, job, OccupancySettings(voxel=s.map_voxel))
+    m = out.map
+    occ = m.occupied()
+    band = default_band(res.trajectory)
+    grid = occupancy_grid(m, *band)
+    files = [m.save(targets["occupancy.npz"]), *write_map_server(grid, targets["grid.yaml"])]
+    summary = {"voxels": len(m), "occupied": int(occ.shape[0]), "frames": m.frames,
+               "band_m": list(band), "grid": grid.counts()}
+    return occ, summary, files
+
+
 def run_slam(seq, out: str | os.PathLike[str], *, radar: str = "single_chip",
              source: str | None = None, settings: SlamSettings | None = None,
              ego_config: EgoVelocityConfig | None = None, seed: int = 0,
@@ -208,10 +235,16 @@ def run_slam(seq, out: str | os.PathLike[str], *, radar: str = "single_chip",
     res = slam_from_clouds(_clouds(stream, convert, idx), stream.timestamps[idx], seq.calib,
                            seq.imu.timestamps, seq.imu.data, radar=radar, settings=s,
                            frontend=FrontEndSettings(cfg, seed=seed), groundtruth=gt)
+    occupancy = (_occupancy(seq, res, radar, src, s, targets) if s.map_kind == "occupancy"
+                 else None)
+    map_points = res.map_points if occupancy is None else occupancy[0]
     scores = None
     if score_against_lidar:
-        scores = score_map(res.map_points, reference_lidar_map(seq))
+        scores = score_map(map_points, reference_lidar_map(seq))
     summary = slam_summary(res)
+    if occupancy is not None:
+        summary["map_points"] = int(map_points.shape[0])
+        summary["occupancy"] = occupancy[1]
     info = {"run": run_path(seq), "run_name": seq.name,
             "calib": str(getattr(seq.calib, "source", "preset")), "radar": radar, "source": src,
             "estimator": "slam", "seed": seed, "settings": asdict(s),
@@ -229,8 +262,12 @@ def run_slam(seq, out: str | os.PathLike[str], *, radar: str = "single_chip",
                             "front end, before optimisation)"])]
     atomic_write_text(targets["keyframes.csv"], _keyframes_csv(res))
     atomic_write_text(targets["loops.csv"], _loops_csv(res))
-    write_ply(targets["map.ply"], res.map_points, ("x", "y", "z", "count", "intensity"),
-              overwrite=True)
+    if occupancy is None:
+        write_ply(targets["map.ply"], res.map_points, ("x", "y", "z", "count", "intensity"),
+                  overwrite=True)
+    else:
+        write_ply(targets["map.ply"], map_points, PLY_FIELDS, overwrite=True)
+        written += occupancy[2]
     atomic_write_text(targets["slam.json"], json.dumps(info, indent=2, default=float) + "\n")
     odo_info = {k: info[k] for k in ("run", "run_name", "calib", "radar", "source", "estimator",
                                      "initial_pose", "coloradar_version")}

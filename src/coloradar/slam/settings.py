@@ -138,10 +138,16 @@ class SlamSettings:
 
     Map
     ---
+    map_kind
+        What ``run_slam`` writes as ``map.ply``: ``"occupancy"`` (default; a probabilistic
+        occupancy map of every frame placed by the optimised trajectory,
+        :mod:`coloradar.mapping`: free space carved by the rays, ghosts outvoted) or
+        ``"points"`` (the keyframes' submaps, :attr:`SlamResult.map_points`, as before issue 40).
     map_voxel
-        Voxel edge of the map [m].
+        Voxel edge of the map [m] (both kinds).
     map_min_keyframes
-        A voxel is kept only when the submaps of this many keyframes put a point in it.
+        A voxel of the point map is kept only when the submaps of this many keyframes put a
+        point in it.
     """
 
     keyframe_distance: float = 1.0
@@ -186,6 +192,7 @@ class SlamSettings:
     odometry_floor_rotation_deg: float = 0.1
     odometry_cov_scale: float = 1.0
     max_loop_candidates: int = 2
+    map_kind: str = "occupancy"
     map_voxel: float = 0.15
     map_min_keyframes: int = 3
 
@@ -207,6 +214,9 @@ class SlamSettings:
         if self.disjoint_registration not in ("elevation", "always", "never"):
             raise SettingsError(f"SlamSettings.disjoint_registration must be 'elevation', "
                                 f"'always' or 'never', got {self.disjoint_registration!r}")
+        if self.map_kind not in ("occupancy", "points"):
+            raise SettingsError(f"SlamSettings.map_kind must be 'occupancy' or 'points', got "
+                                f"{self.map_kind!r}")
         if self.robust_kernel not in ("cauchy", "huber", "none"):
             raise SettingsError(f"SlamSettings.robust_kernel must be 'cauchy', 'huber' or "
                                 f"'none', got {self.robust_kernel!r}")
