@@ -49,7 +49,8 @@ def test_trajectory_derivatives_match_finite_differences(profile, clockwise):
     fwd = s.rotation.apply([0.0, 1.0, 0.0])[1:, :2]
     v = s.velocity[1:, :2]
     cos = np.einsum("ij,ij->i", fwd, v) / np.linalg.norm(fwd, axis=1) / np.linalg.norm(v, axis=1)
-    limit = {"smooth": 0.99, "handheld": 0.97, "aggressive": 0.6, "vehicle": 0.99}[profile]
+    limit = {"smooth": 0.99, "handheld": 0.97, "aggressive": 0.6, "vehicle": 0.99,
+             "ramps": 0.9}[profile]   # ramps: a 2 Hz sway of ±1.5 cm, ~11° of lateral velocity
     assert np.all(cos > limit)
 
 

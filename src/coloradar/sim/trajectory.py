@@ -229,7 +229,8 @@ def make_trajectory(path: Path, profile: str = "smooth",
     if "heave" in spec:
         # Slow rise and fall on top of the gait's bob (drawn after it: the other profiles'
         # draws stay as they were).
-        h = _random_sinusoids(rng, *spec["heave"], n=2)
+        h_amp, h_band = spec["heave"]
+        h = _random_sinusoids(rng, h_amp, h_band, n=2)
         z = offset[2]
         offset = (offset[0], offset[1], Sinusoids(np.concatenate([z.amplitude, h.amplitude]),
                                                   np.concatenate([z.frequency, h.frequency]),
