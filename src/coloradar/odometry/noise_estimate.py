@@ -21,7 +21,9 @@ runaway.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import nnls
@@ -29,7 +31,7 @@ from scipy.optimize import nnls
 from ..errors import SettingsError
 from .doppler import PointNoise, angle_basis
 
-__all__ = ["NoiseEstimateConfig", "PointNoiseEstimator", "VerticalPrior"]
+__all__ = ["NoiseEstimateConfig", "PointNoiseEstimator", "VerticalPrior", "observer"]
 
 _MIN_DESIGN = np.array([1.0, np.sin(np.radians(30.0)) ** 2, np.sin(np.radians(6.0)) ** 2]) ** 2
 """The smallest design magnitudes of the prior's pseudo-points (squared, per variance)."""
@@ -196,3 +198,13 @@ class VerticalPrior:
         self._n += 1
         a = 1.0 / min(self._n, self.window)
         self._mean += a * (yz * yz - var - self._mean)
+
+
+def observer(estimator: PointNoiseEstimator, vertical: VerticalPrior
+             ) -> Callable[..., None]:
+    """A :data:`~coloradar.odometry.doppler.PointObserver` that reports a frame's accepted
+    points and solution to both."""
+    def observe(*args: Any) -> None:
+        estimator.add(*args)
+        vertical.add(*args)
+    return observe

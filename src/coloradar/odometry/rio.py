@@ -31,7 +31,6 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
 
 import numpy as np
 from scipy.integrate import trapezoid  # numpy.trapezoid needs numpy >= 2
@@ -52,7 +51,7 @@ from .doppler import (
 )
 from .eskf import BA, BG, TH, ErrorStateEKF, ImuNoise, P, V, skew
 from .gravity import gravity_alignment
-from .noise_estimate import NoiseEstimateConfig, PointNoiseEstimator, VerticalPrior
+from .noise_estimate import NoiseEstimateConfig, PointNoiseEstimator, VerticalPrior, observer
 from .rio_outputs import KeepPose, PoseOutputs, PoseState
 from .smoother import RtsSmoother
 from .velocity_track import EgoVelocityTrack
@@ -171,8 +170,9 @@ class RioConfig:
         Settings of the Doppler-point update.
     point_noise
         Per radar (in the order of the tracks) the points' noise; None: each radar's default
-        (:func:`~coloradar.odometry.doppler.point_noise_for`). With ``noise_estimate``
-        enabled (the default) this is the prior of the noise measured from the data.
+        (:func:`~coloradar.odometry.doppler.point_noise_for`). Where the noise is measured
+        (``noise_estimate``: by default for the radars whose points are used in 3-D), the
+        prior of that measurement.
     vertical_prior
         A radar whose points are used in 3-D also updates its ``v_z ≈ 0`` with a standard
         deviation measured from its own frames (:class:`.noise_estimate.VerticalPrior`): the
@@ -238,9 +238,8 @@ class RioConfig:
         if not 0 < self.gate_probability <= 1:
             raise SettingsError(f"gate_probability must be in (0, 1], got {self.gate_probability}")
         if self.extrinsic_rotation_axes not in ("auto", "yaw", "all"):
-            raise SettingsError(f"RioConfig.extrinsic_rotation_axes must be 'auto', 'yaw' or "
-                                "'all', "
-                                f"got {self.extrinsic_rotation_axes!r}")
+            raise SettingsError("RioConfig.extrinsic_rotation_axes must be 'auto', 'yaw' or "
+                                f"'all', got {self.extrinsic_rotation_axes!r}")
         if self.update not in UPDATES:
             raise SettingsError(f"unknown radar update {self.update!r}; expected one of "
                                 f"{', '.join(UPDATES)}")
@@ -329,14 +328,6 @@ def _planar(track: EgoVelocityTrack) -> bool:
     ok = track.ok & np.all(np.isfinite(track.velocity), axis=1)
     return bool(ok.any()) and bool(np.all(track.velocity[ok, 2] == 0.0)
                                    and np.all(track.covariance[ok, 2, :] == 0.0))
-
-
-def _observer(est: PointNoiseEstimator, vert: VerticalPrior) -> Any:
-    """What a frame's Doppler update reports its accepted points and solution to."""
-    def observe(*a: Any) -> None:
-        est.add(*a)
-        vert.add(*a)
-    return observe
 
 
 def _coarse_elevation(calib: Calibration, radar: str) -> bool:
@@ -714,7 +705,7 @@ class _Loop:
                     (vert.std if s.cfg.vertical_prior else None)
                 used = doppler_update(ekf, r, s.t_ir[r], s.pts[r][k][0], est.noise,
                                       s.dcfg[r], min(want - tau, 0.0), vz,
-                                      _observer(est, vert))
+                                      observer(est, vert))
                 st["points"] += s.pts[r][k][0].shape[0]
             if still:
                 pass                    # the zero-velocity update was this frame's update
