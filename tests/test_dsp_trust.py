@@ -177,6 +177,7 @@ def wall_patch_scene(g: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np
     return np.array(pos), np.array(snr), np.arange(len(pos)) < 4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "limit"), [("cascade", 8), ("single_chip", 8)])
 def test_few_points_off_every_scatterer_beside_an_extended_target(radars, name, limit):
     """Precision on 8 frames (noise, four point targets, two wall patches): points farther

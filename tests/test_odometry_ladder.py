@@ -235,12 +235,14 @@ def _rungs(check: str) -> list:
             if r in KNOWN_MISSES[check] else r for r in lad.RUNGS]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rung", _rungs("dr"), ids=RUNG_IDS)
 def test_default_is_within_1_5x_dead_reckoning_with_true_attitude(rung):
     f = figures(rung)
     assert f.default[0] <= DR_FACTOR * f.dr_true_3d[0] + SLACK, f"rung {rung}: {f.line()}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rung", _rungs("loose"), ids=RUNG_IDS)
 def test_default_is_no_worse_than_the_loosely_coupled_update(rung):
     f = figures(rung)
