@@ -234,6 +234,7 @@ def test_chain_holds_its_false_alarm_rate_on_common_mode_noise(pfa, rho):
     assert rate[1] > 3.0 * pfa, rate / pfa
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["go", "so"])
 def test_chain_runs_go_and_so_at_the_requested_rate(kind):
     """GO/SO in the chain (range edges truncated): the last range bin has no training cells

@@ -428,6 +428,7 @@ def test_filter_is_consistent_nees_within_chi_square_bounds():
     assert lo < nees.mean() < hi, (nees.mean(), lo, hi, nees)
 
 
+@pytest.mark.slow
 def test_end_to_end_on_a_simulated_run(tmp_path):
     """A 10 s simulated corridor run (cascade ADC through coloradar.dsp, 3DM-GX5-25-class IMU,
     the rig still for 2 s without saying so, radar clock 25 ms late): the default estimator

@@ -114,6 +114,7 @@ def test_cascade_adc_through_dsp_matches_the_truth_velocity(cascade_run):
     assert rmse_axes[0] < 0.05 and rmse_axes[1] < 0.05 and rmse_axes[2] < 0.15, rmse_axes
 
 
+@pytest.mark.slow
 def test_radar_inertial_odometry_over_30_s_within_2_percent(long_run, tmp_path):
     seq = _open(long_run)
     out = run_odometry(seq, tmp_path / "odo", radar="single_chip", orientation="imu")
@@ -134,6 +135,7 @@ def test_radar_inertial_odometry_over_30_s_within_2_percent(long_run, tmp_path):
     np.testing.assert_array_equal(track.velocity, out.track.velocity)
 
 
+@pytest.mark.slow
 def test_ground_truth_attitude_bounds_the_imu_baseline(long_run, tmp_path):
     seq = _open(long_run)
     imu = run_odometry(seq, tmp_path / "imu", radar="single_chip", orientation="imu",
@@ -149,6 +151,7 @@ def test_ground_truth_attitude_bounds_the_imu_baseline(long_run, tmp_path):
     assert e_gt.rmse < 0.02 * e_gt.path_length and e_imu.rmse < 0.02 * e_imu.path_length
 
 
+@pytest.mark.slow
 def test_odometry_and_evaluate_commands(long_run, tmp_path, capsys):
     out = tmp_path / "cli"
     args = ["odometry", str(long_run), "--radar", "single_chip", "--out", str(out),
@@ -182,6 +185,7 @@ def test_evaluation_plot_is_written(long_run, tmp_path):
         write_evaluation(evaluate_odometry(tmp_path), tmp_path)
 
 
+@pytest.mark.slow
 def test_ego_velocity_report_for_the_demo(long_run):
     rep = ego_velocity_report(_open(long_run), max_frames=10)
     assert rep["radar"] == "single_chip" and rep["source"] == "pointclouds"

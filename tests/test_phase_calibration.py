@@ -193,6 +193,7 @@ def fast_trials(calib, hardware: PhaseFrequencyCalib, proc, v_range, trials, see
     return np.array(out)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("key", "v_range", "gauge"), [("single_chip", (1.1, 1.7), False),
                                                        ("cascade_stale", (1.3, 2.3), False),
                                                        ("cascade", (1.3, 2.3), True)])
