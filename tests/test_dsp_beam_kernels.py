@@ -429,6 +429,10 @@ def test_compiled_joint_refinement_is_the_numpy_loop(name, focus, monkeypatch):
     refinement keeps the same sources at the same directions as the numpy loop it replaces
     (the same kernels inside: bit-equal), with powers equal to 1 ulp (numba's |z| is hypot,
     numpy's its own)."""
+    from _synth import REFERENCE_CALIB
+    if focus and not REFERENCE_CALIB.is_dir():
+        # Focusing needs the release's near-field phases; the preset has none.
+        pytest.skip(f"the release's calibration not at {REFERENCE_CALIB}")
     from _synth import exact_adc
 
     calib = _cascade_calib() if name == "cascade" else preset_radar(name)
