@@ -349,8 +349,9 @@ def solve_points(u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray
     w = np.full(m, 1.0 / sa.mean()) if eiv else 1.0 / sa
     b = -(ua * (w * ra)[:, None]).sum(axis=0)
     meat = (ua * (w * w * sa)[:, None]).T @ ua
-    a_e = (ua * w[:, None]).T @ ua
-    if eiv:
+    if not eiv:
+        a_e = (ua * w[:, None]).T @ ua
+    else:
         a_e = _expected_regressor(ua, w, noise.azimuth_std, noise.elevation_std)
         # The direction noise is known only roughly (σ² within a factor of two): the
         # correction's own uncertainty, ΔA_e y, goes into the covariance.

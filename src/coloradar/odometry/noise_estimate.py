@@ -29,12 +29,15 @@ import numpy as np
 from scipy.optimize import nnls
 
 from ..errors import SettingsError
-from .doppler import PointNoise, angle_basis
+from .doppler import PointNoise, PointSolution, angle_basis
 
 __all__ = ["NoiseEstimateConfig", "PointNoiseEstimator", "VerticalPrior", "observer"]
 
-_MIN_DESIGN = np.array([1.0, np.sin(np.radians(30.0)) ** 2, np.sin(np.radians(6.0)) ** 2]) ** 2
-"""The smallest design magnitudes of the prior's pseudo-points (squared, per variance)."""
+_MIN_DESIGN = np.array([1.0, np.sin(np.radians(30.0)) ** 4, np.sin(np.radians(6.0)) ** 4])
+"""The smallest design magnitudes of the prior's pseudo-points, per variance: 1 for the
+range rate; for the angles those of points seen at 1 m/s about 14.5° (azimuth) and 0.6°
+(elevation) off the motion (``sin⁴`` of 30° and 6°, the values the figures were measured
+with)."""
 _MIN_CAP = np.radians(5.0)
 """The angle noise is capped at twice the prior's, and never below this [rad]."""
 
@@ -130,9 +133,9 @@ class PointNoiseEstimator:
 
     def _solve(self) -> PointNoise:
         # Each column gets prior_points pseudo-points of the data's average design (the
-        # prior's weight against the data the same for every variance), at least that of
-        # points seen at 1 m/s 30° (azimuth) and 6° (elevation) off the motion: slow frames
-        # (the first ones, at rest) inform the angle variances little and must not move them.
+        # prior's weight against the data the same for every variance), at least
+        # _MIN_DESIGN: slow frames (the first ones, at rest) inform the angle variances
+        # little and must not move them.
         scale = np.maximum(np.diag(self._m) / max(self._n, 1), _MIN_DESIGN)
         lam = self.config.prior_points * scale
         m = self._m + np.diag(lam)
@@ -186,15 +189,14 @@ class VerticalPrior:
         return float(np.sqrt(max(self._mean, self.floor**2)))
 
     def add(self, u: np.ndarray, rates: np.ndarray, y: np.ndarray, py: np.ndarray,
-            solution: object = None) -> None:
-        """Count a frame's point solution (a :class:`~coloradar.odometry.doppler.PointSolution`;
-        the other arguments are those of the observer signature, unused)."""
-        basis = getattr(solution, "basis", None)
-        if basis is None or basis.shape[0] < 3:
+            solution: PointSolution | None = None) -> None:
+        """Count a frame's point solution (the other arguments are those of the observer
+        signature, unused)."""
+        if solution is None or solution.basis.shape[0] < 3:
             return
-        b_inv = np.linalg.inv(basis)
-        yz = float((b_inv @ solution.value)[2])          # type: ignore[attr-defined]
-        var = float((b_inv @ solution.covariance @ b_inv.T)[2, 2])  # type: ignore[attr-defined]
+        b_inv = np.linalg.inv(solution.basis)
+        yz = float((b_inv @ solution.value)[2])
+        var = float((b_inv @ solution.covariance @ b_inv.T)[2, 2])
         self._n += 1
         a = 1.0 / min(self._n, self.window)
         self._mean += a * (yz * yz - var - self._mean)
