@@ -16,13 +16,11 @@ trajectories and their exact derivatives; not :mod:`coloradar.sim`). Two groups 
   of :data:`SLACK` (0.02 % of distance) so that a tie cannot fail by noise.
 
 The ladder checks whatever the default is: ``benchmarks/ladder_odometry.py`` prints its
-figures with the alternatives over several seeds. The default is still planar for the
-single chip (issue 42 is open: the 3-D mode, ``--model 3d``, is far ahead on these rungs and
-on runs written by another program, but drifts in height on the project's Monte Carlo;
-docs/odometry.md, "3-D single chip"). Three checks fail with it and are strict xfails
-(:data:`KNOWN_MISSES`): rungs 1 and 3 (walk, rising and falling) the dead-reckoning check
-(ATE 0.21 % against 1.5 × 0.055 + 0.02) and rung 2 (vehicle, exact directions) the loosely
-coupled check (0.088 % against 0.028 + 0.02). A strict xfail fails the day it passes.
+figures with the alternatives over several seeds. The single chip's default is 3-D (issue
+42; with the planar model, rungs 1 and 3, a walk that rises and falls, failed the
+dead-reckoning check: ATE 0.21 % against 1.5 × 0.055 + 0.02). One check still fails and is a
+strict xfail (:data:`KNOWN_MISSES`): rung 2 (vehicle, exact directions) the loosely coupled
+check (0.058 % against 0.028 + 0.02). A strict xfail fails the day it passes.
 """
 
 from __future__ import annotations
@@ -222,9 +220,8 @@ def figures(rung: int) -> Figures:
 RUNG_IDS = [f"{r}-{lad.RUNG_NAMES[r].replace(' ', '_')}" for r in lad.RUNGS]
 
 
-KNOWN_MISSES = {
-    "dr": {1: "issue 42 open: the planar default cannot follow a walk that rises and falls",
-           3: "issue 42 open: the planar default cannot follow a walk that rises and falls"},
+KNOWN_MISSES: dict[str, dict[int, str]] = {
+    "dr": {},
     "loose": {2: "issue 42 open: on a vehicle with exact directions the loosely coupled "
                  "update beats the Doppler-point update"},
 }

@@ -139,14 +139,16 @@ class DopplerConfig:
     errors_in_variables
         Remove the direction errors' bias (module docstring); False: the plain stacked update.
     planar
-        Use the points for the radar's ``v_x, v_y`` only (given the filter's ``v_z``);
-        None (default): as the radar's ego-velocity model (planar for the single chip, 3-D
-        for the cascade); False: 3-D (``--model 3d``). Issue 42 measured both for the single
-        chip (docs/odometry.md, "3-D single chip"): on runs written by another program that
-        rise and fall, 3-D with the noise measured from the data is far ahead (ATE 0.35 →
-        0.03 %, 0.61 → 0.10 %); on the project's Monte Carlo, whose clouds' elevations sit
-        2–8° above boresight, it drifts in height (median final 0.30 → 0.86 %). Until that
-        is understood the default stays planar.
+        Use the points for the radar's ``v_x, v_y`` only (given the filter's ``v_z``, held
+        near 0 by ``RioConfig.planar_vz_std``: ``--model planar``, for a rig that truly moves
+        in the radar's plane); False (default): 3-D for every radar; None: as the radar's
+        per-frame ego-velocity model (planar for the single chip, 3-D for the cascade).
+        Issue 42 measured both for the single chip (docs/odometry.md, "3-D single chip"): on
+        runs written by another program, whose rigs rise and fall, 3-D with the noise
+        measured from the data is far ahead (ATE 0.34 → 0.03 %, 0.60 → 0.10 %); on the
+        project's Monte Carlo planar is ahead where the rig keeps its height (handheld and
+        vehicle runs: 3-D drifts in height, median final 0.30 → 0.75 %) and behind on the
+        runs that rise and fall. A rig's floor is not known in advance; the default is 3-D.
     min_range
         Points closer than this are left out [m] (the rig, antenna leakage).
     noise_uncertainty
@@ -159,7 +161,7 @@ class DopplerConfig:
     min_points: int = 4
     min_fraction: float = 0.3
     errors_in_variables: bool = True
-    planar: bool | None = None
+    planar: bool | None = False
     min_range: float = 0.3
     noise_uncertainty: float = 1.0
 
