@@ -53,12 +53,15 @@ from coloradar.geometry.cloud_metrics import nearest_distances
 from coloradar.mapping import (
     OccupancyJob,
     OccupancySettings,
+    StaticGate,
     build_occupancy_map,
     grid_iou,
     map_quality,
     occupancy_from_frames,
     occupancy_grid,
     radar_sensor_model,
+    sensor_velocities,
+    static_frames,
 )
 from coloradar.mapping.build import frame_evidence
 from coloradar.mapping.output import default_band
@@ -89,8 +92,13 @@ def returned_scatterers(run) -> np.ndarray:
     """World positions of the static scatterers the radar returned (module docstring)."""
     b_T_r = run.calib.transforms[run.radar].matrix()
     poses = run.groundtruth.interpolate(run.timestamps, tolerance=1.0).matrices()
+    # Only the detections a static world explains (the scenes' people and carts are returned
+    # too, and one passing a wall is not a return of the wall).
+    w = run.calib.radar(run.radar).waveform
+    clouds = static_frames(run.clouds, sensor_velocities(run.groundtruth, run.timestamps, b_T_r),
+                           StaticGate(), w.velocity_bin_width, w.max_velocity)
     pts = [c[:, :3] @ (m @ b_T_r)[:3, :3].T + (m @ b_T_r)[:3, 3]
-           for c, m in zip(run.clouds, poses, strict=True) if c.shape[0]]
+           for c, m in zip(clouds, poses, strict=True) if c.shape[0]]
     scat = run.scene.static_scatterers.position
     d, i = cKDTree(scat).query(np.concatenate(pts))
     return scat[np.unique(i[d <= 0.5])]
@@ -149,7 +157,7 @@ def _scores(points: np.ndarray, run, truth: np.ndarray) -> dict:
 
 
 def single_chip(cache: Path, scene: str, seed: int, laps: float,
-                settings: OccupancySettings) -> dict:
+                settings: OccupancySettings, static_gate: bool = True) -> dict:
     from coloradar.odometry import ego_velocity_config
     from coloradar.odometry.metrics import absolute_trajectory_error
     from coloradar.slam import slam_from_clouds
@@ -170,10 +178,15 @@ def single_chip(cache: Path, scene: str, seed: int, laps: float,
     keep = res.trajectory.covers(run.timestamps)          # frames SLAM placed
     m = res.trajectory.interpolate(run.timestamps[keep]).matrices() @ b_T_r
     model = radar_sensor_model(run.calib.radar("single_chip"))
+    w = run.calib.radar("single_chip").waveform
     t0 = time.perf_counter()
-    occ = occupancy_from_frames([c for c, k in zip(clouds, keep, strict=True) if k],
-                                m[:, :3, :3], m[:, :3, 3], frame_evidence(model, settings),
-                                settings)
+    mapped = [c for c, k in zip(clouds, keep, strict=True) if k]
+    if static_gate:          # as `coloradar map` does: the sensor's velocity from SLAM's poses
+        mapped = static_frames(mapped, sensor_velocities(res.trajectory, run.timestamps[keep],
+                                                         b_T_r),
+                               StaticGate(), w.velocity_bin_width, w.max_velocity)
+    occ = occupancy_from_frames(mapped, m[:, :3, :3], m[:, :3, 3],
+                                frame_evidence(model, settings), settings)
     t_map = time.perf_counter() - t0
     truth = returned_scatterers(run)
     ate = absolute_trajectory_error(res.trajectory, run.groundtruth).rmse

@@ -144,9 +144,10 @@ def test_a_wall_seen_once_from_far_and_often_from_near_is_where_the_near_views_p
 
 
 def test_heatmap_cells_become_occupied_free_and_shadow():
-    # A 1 x 9 x 40 heatmap (one elevation row), a noise floor of 1 with exponential speckle,
-    # and one strong target at range bin 20 of the middle beam, seen 20 times (a cell is free
-    # evidence when it is below the floor: about every other frame).
+    # A 1 x 9 x 40 heatmap (one elevation row) of noise as a heatmap holds it (each cell the
+    # peak over 32 Doppler bins of exponential speckle), and one strong target at range bin 20
+    # of the middle beam, seen 20 times (a cell is free evidence when it is below the floor:
+    # about every other frame).
     nr, na = 40, 9
     cfg = HeatmapConfig(num_range_bins=nr, num_elevation_bins=1, num_azimuth_bins=na,
                         range_bin_width=0.1, azimuth_bins=np.linspace(-0.4, 0.4, na),
@@ -156,8 +157,8 @@ def test_heatmap_cells_become_occupied_free_and_shadow():
     m = OccupancyMap(s)
     rng = np.random.default_rng(3)
     for _ in range(20):
-        h = rng.exponential(1.0, (1, na, nr)).astype(np.float32) * 0.5
-        h[0, 4, 20] = 1000.0                           # 30 dB above the floor
+        h = rng.exponential(1.0, (32, 1, na, nr)).max(axis=0).astype(np.float32) * 0.5
+        h[0, 4, 20] = 1000.0                           # about 27 dB above the floor
         m.integrate(*heatmap_evidence(h, np.eye(3), np.zeros(3), model, s))
     assert m.state(np.array([[2.0, 0.0, 0.0]]))[0] == OCCUPIED       # range 20 · 0.1 m
     assert m.state(np.array([[1.0, 0.0, 0.0]]))[0] == FREE            # in front of it
@@ -221,6 +222,20 @@ def test_the_grid_files_load_in_a_map_server_reader(tmp_path):
     # the free pixels are in front of the wall
     _, i = np.nonzero(states == FREE)
     assert np.all(origin[0] + (i + 0.5) * res < 5.0)
+
+
+def test_a_grid_of_one_frame_spans_what_the_sensor_looked_at():
+    # One frame decides nothing (no voxel occupied or free yet), but the grid covers the
+    # rays' extent: from the sensor at the origin to the wall 5 m ahead, 6 m wide.
+    rng = np.random.default_rng(6)
+    m = _map(_wall_frames(rng, [0.0], n=60))
+    assert m.occupied().shape[0] == 0
+    grid = occupancy_grid(m, -0.3, 0.3, margin=0)
+    assert grid.counts()["occupied"] == grid.counts()["free"] == 0
+    x0, y0 = grid.origin
+    ny, nx = grid.states.shape
+    assert x0 <= 0.15 and x0 + nx * m.voxel >= 5.0
+    assert y0 <= -2.5 and y0 + ny * m.voxel >= 2.5
 
 
 def test_grid_iou_and_map_quality_against_hand_counts():
@@ -290,6 +305,11 @@ def test_map_without_ground_truth_says_what_it_needs_and_works_with_poses(small_
         assert (tmp_path / "m" / name).is_file(), name
     info = json.loads((tmp_path / "m" / "map.json").read_text())
     assert info["poses"] == str(tum) and info["sensor"] == "single_chip"
+    assert info["job"]["static_gate"]["direction_std_deg"] == 3.0      # the static test, on
+    code, _, err = _cli(["map", run, "--out", tmp_path / "mk", "--poses", tum, "--keep-movers",
+                         "--quiet"], capsys)
+    assert code == 0, err
+    assert json.loads((tmp_path / "mk" / "map.json").read_text())["job"]["static_gate"] is None
     code, _, err = _cli(["map", run, "--out", tmp_path / "m", "--poses", tum], capsys)
     assert code == 1 and "--overwrite" in err                      # never overwritten unasked
     code, _, err = _cli(["map", run, "--out", tmp_path / "m2", "--poses", tmp_path / "nope"],

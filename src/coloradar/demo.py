@@ -364,13 +364,16 @@ def _loop_closure(folder: Path, seed: int, pictures: bool, overwrite: bool) -> t
 
 def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
     """``map.png``: the occupancy grid (rig height ± 0.5 m) of every frame of the walk placed
-    by SLAM's trajectory."""
+    by SLAM's trajectory (the points a static world explains, as ``coloradar map`` does)."""
     from .mapping import (
         OccupancySettings,
+        StaticGate,
         frame_evidence,
         occupancy_from_frames,
         occupancy_grid,
         radar_sensor_model,
+        sensor_velocities,
+        static_frames,
     )
     from .mapping.output import default_band
     from .viz import save_figure
@@ -380,8 +383,12 @@ def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
     m = res.trajectory.interpolate(run.timestamps[keep]).matrices() @ \
         run.calib.transforms["single_chip"].matrix()
     s = OccupancySettings()
-    occ = occupancy_from_frames([c for c, k in zip(run.clouds, keep, strict=True) if k],
-                                m[:, :3, :3], m[:, :3, 3],
+    b_T_r = run.calib.transforms["single_chip"].matrix()
+    w = run.calib.single_chip.waveform
+    clouds = static_frames([c for c, k in zip(run.clouds, keep, strict=True) if k],
+                           sensor_velocities(res.trajectory, run.timestamps[keep], b_T_r),
+                           StaticGate(), w.velocity_bin_width, w.max_velocity)
+    occ = occupancy_from_frames(clouds, m[:, :3, :3], m[:, :3, 3],
                                 frame_evidence(radar_sensor_model(run.calib.single_chip), s), s)
     grid = occupancy_grid(occ, *default_band(res.trajectory))
     fig = occupancy_figure(grid, res.trajectory.translations, width=10.0, title=(

@@ -74,6 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "trajectory's median height ± 0.5 m)")
     p.add_argument("--rerun", action="store_true",
                    help="occupancy map: also write map.rrd (needs the extra [rerun])")
+    p.add_argument("--keep-movers", action="store_true",
+                   help="occupancy map: map every radar point (default: leave out the points "
+                        "whose range rates a static world does not explain, movers and ghosts; "
+                        "the sensor's velocity from the poses)")
     p.add_argument("--ascii", action="store_true", help="point map: write ascii instead of binary")
     add_file_output_args(p)
     add_quiet_arg(p)
@@ -162,7 +166,13 @@ def _point_map(args: argparse.Namespace) -> int:
 
 
 def _occupancy_map(args: argparse.Namespace) -> int:
-    from ..mapping import OccupancyJob, OccupancySettings, build_occupancy_map, occupancy_grid
+    from ..mapping import (
+        OccupancyJob,
+        OccupancySettings,
+        StaticGate,
+        build_occupancy_map,
+        occupancy_grid,
+    )
     from ..mapping.output import default_band, map_targets, write_map_folder
 
     _check_poses_input(args.poses)
@@ -179,7 +189,8 @@ def _occupancy_map(args: argparse.Namespace) -> int:
     args.sensor = args.sensor or pick_radar(seq, None, "single_chip", args.quiet)
     traj, poses_from = load_poses(seq, args.poses, args.quiet)
     job = OccupancyJob(sensor=args.sensor, source=args.source or "points", start=args.start,
-                       duration=args.duration, stride=args.stride, max_range=args.max_range)
+                       duration=args.duration, stride=args.stride, max_range=args.max_range,
+                       static_gate=None if args.keep_movers else StaticGate())
     settings = OccupancySettings(voxel=args.voxel or OccupancySettings().voxel)
     t0 = time.perf_counter()
     res = build_occupancy_map(seq, traj, job, settings, progress=Progress(
@@ -192,7 +203,8 @@ def _occupancy_map(args: argparse.Namespace) -> int:
             "source": job.source, "read_from": res.points_from, "poses": poses_from,
             "frames_mapped": int(res.frame_indices.size), "seconds": round(seconds, 3),
             "settings": asdict(settings),
-            "job": {k: getattr(job, k) for k in ("start", "duration", "stride", "max_range")}}
+            "job": {**{k: getattr(job, k) for k in ("start", "duration", "stride", "max_range")},
+                    "static_gate": None if job.static_gate is None else asdict(job.static_gate)}}
     written = write_map_folder(targets, res.map, grid, poses, info)
     written += _extras(args, targets, res, grid, poses)
     if not args.quiet:

@@ -4,7 +4,8 @@ A sparse, voxel-hashed 3-D log-odds map (:mod:`.voxels`), filled by inverse sens
 point clouds (:mod:`.sensor_model`: a return's occupancy spread by its range and angle
 uncertainty, free space along its ray) and of 3-D heatmaps (:mod:`.heatmap_model`: every cell
 against the heatmap's own noise floor), one frame at a time along any trajectory
-(:mod:`.build`); a 2-D grid of a height band in the ROS ``map_server`` format (:mod:`.grid2d`);
+(:mod:`.build`), a radar's movers and ghosts left out by the Doppler test of a static world
+(:mod:`.static_gate`); a 2-D grid of a height band in the ROS ``map_server`` format (:mod:`.grid2d`);
 scores against a reference (:mod:`.quality`). See ``docs/mapping.md``.
 
 Layer: above ``geometry`` (and ``dsp``, for the heatmap cells' placement), below ``sim``;
@@ -28,6 +29,7 @@ from .sensor_model import (
     point_evidence,
     radar_sensor_model,
 )
+from .static_gate import StaticGate, sensor_velocities, static_frames, static_mask
 from .voxels import FREE, OCCUPIED, UNKNOWN, OccupancyMap, OccupancySettings
 
 __all__ = [
@@ -43,6 +45,7 @@ __all__ = [
     "OccupancyResult",
     "OccupancySettings",
     "PointSensorModel",
+    "StaticGate",
     "build_occupancy_map",
     "format_map_quality",
     "frame_evidence",
@@ -54,5 +57,8 @@ __all__ = [
     "occupancy_grid",
     "point_evidence",
     "radar_sensor_model",
+    "sensor_velocities",
+    "static_frames",
+    "static_mask",
     "write_map_server",
 ]

@@ -10,7 +10,7 @@ read and dropped one at a time: memory is the map's.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
@@ -20,6 +20,7 @@ from ..geometry import Trajectory, sensor_to_base
 from ..geometry.timesync import window_indices
 from .heatmap_model import HeatmapModel, heatmap_evidence
 from .sensor_model import PointSensorModel, lidar_sensor_model, point_evidence, radar_sensor_model
+from .static_gate import StaticGate, sensor_velocities, static_mask
 from .voxels import OccupancyMap, OccupancySettings
 
 __all__ = ["MAP_INPUTS", "OccupancyJob", "OccupancyResult", "build_occupancy_map",
@@ -32,7 +33,7 @@ ADC frames' points) or heatmaps (a radar's)."""
 
 _DEG = np.pi / 180.0
 
-Evidence = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+Evidence = Callable[..., tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,10 @@ class OccupancyJob:
         Keyword arguments of :class:`coloradar.dsp.RadarProcessor` for points from ADC.
     heatmap
         Keyword arguments of :class:`~.heatmap_model.HeatmapModel` beyond its grid.
+    static_gate
+        A radar's points, or heatmap returns, whose range rates a static world does not
+        explain (movers, ghosts) are left out (:mod:`.static_gate`, the sensor's velocity
+        from the trajectory); None: all are mapped. The lidar is not tested.
     """
 
     sensor: str = "single_chip"
@@ -69,6 +74,7 @@ class OccupancyJob:
     max_range: float | None = None
     processing: Mapping[str, Any] | None = None
     heatmap: Mapping[str, Any] | None = None
+    static_gate: StaticGate | None = field(default_factory=StaticGate)
 
     def __post_init__(self) -> None:
         if self.sensor not in ("single_chip", "cascade", "lidar"):
@@ -109,7 +115,8 @@ class OccupancyResult:
 def occupancy_from_frames(frames: Iterable[np.ndarray | None], rotations: np.ndarray,
                           translations: np.ndarray, evidence: Evidence,
                           settings: OccupancySettings | None = None,
-                          progress: Callable[[int, int], None] | None = None) -> OccupancyMap:
+                          progress: Callable[[int, int], None] | None = None,
+                          velocities: np.ndarray | None = None) -> OccupancyMap:
     """Integrate frames into a new map.
 
     Parameters
@@ -119,11 +126,15 @@ def occupancy_from_frames(frames: Iterable[np.ndarray | None], rotations: np.nda
     rotations, translations
         float ``(F, 3, 3)`` and ``(F, 3)``: ``world_T_sensor`` of each frame.
     evidence
-        ``evidence(frame, R, t) -> (keys, delta)`` (:func:`frame_evidence`).
+        ``evidence(frame, R, t) -> (keys, delta)`` (:func:`frame_evidence`), or
+        ``evidence(frame, R, t, v)`` when ``velocities`` are given.
     settings
         The map's settings.
     progress
         Called as ``progress(done, total)`` after each frame.
+    velocities
+        float ``(F, 3)``: the sensor's velocity at each frame [m/s], sensor frame (for a
+        heatmap model's static test, :class:`~.heatmap_model.HeatmapModel`).
     """
     m = OccupancyMap(settings)
     n = len(translations)
@@ -131,7 +142,8 @@ def occupancy_from_frames(frames: Iterable[np.ndarray | None], rotations: np.nda
         if k >= n:
             raise SettingsError(f"more frames than poses ({n})")
         if frame is not None:
-            m.integrate(*evidence(frame, rotations[k], translations[k]))
+            m.integrate(*(evidence(frame, rotations[k], translations[k]) if velocities is None
+                          else evidence(frame, rotations[k], translations[k], velocities[k])))
         if progress is not None:
             progress(k + 1, n)
     return m
@@ -141,7 +153,7 @@ def frame_evidence(model: PointSensorModel | HeatmapModel,
                    settings: OccupancySettings) -> Evidence:
     """The ``evidence`` function of :func:`occupancy_from_frames` for a sensor model."""
     if isinstance(model, HeatmapModel):
-        return lambda f, r, t: heatmap_evidence(f, r, t, model, settings)
+        return lambda f, r, t, v=None: heatmap_evidence(f, r, t, model, settings, v)
     return lambda f, r, t: point_evidence(f, r, t, model, settings)
 
 
@@ -163,8 +175,11 @@ def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | 
         radar = seq.radar(job.sensor)
         points = radar_sensor_model(rc, min_azimuth_std=job.min_azimuth_std_deg * _DEG,
                                     min_elevation_std=job.min_elevation_std_deg * _DEG)
+        w = rc.waveform
         model = HeatmapModel(radar.heatmap_config, points, max_range=job.max_range,
-                             **dict(job.heatmap or {}))
+                             **{"static_gate": job.static_gate,
+                                "velocity_bin_width": float(w.velocity_bin_width),
+                                "max_velocity": float(w.max_velocity), **dict(job.heatmap or {})})
         return radar.heatmaps, None, "heatmaps", model
     from ..dsp.points import radar_point_stream
 
@@ -180,6 +195,18 @@ def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | 
                             min_elevation_std=job.min_elevation_std_deg * _DEG,
                             max_range=job.max_range)
     return stream, convert, src, pm
+
+
+def _static_test(seq, trajectory: Trajectory, times: np.ndarray, job: OccupancyJob, src: str
+                 ) -> Callable[[np.ndarray, int], np.ndarray] | None:
+    """``keep(cloud, k)``: the static test of frame ``k``'s points, or None (no test)."""
+    if job.static_gate is None or job.sensor == "lidar" or src == "heatmaps":
+        return None
+    w = seq.calib.radar(job.sensor).waveform
+    gate = job.static_gate
+    vel = sensor_velocities(trajectory, times, sensor_to_base(seq.calib, job.sensor).matrix())
+    return lambda cloud, k: static_mask(cloud, vel[k], gate, float(w.velocity_bin_width),
+                                        float(w.max_velocity))
 
 
 def build_occupancy_map(seq, trajectory: Trajectory, job: OccupancyJob | None = None,
@@ -224,13 +251,18 @@ def build_occupancy_map(seq, trajectory: Trajectory, job: OccupancyJob | None = 
     r_ws = rot.as_matrix() @ mount[:3, :3]
     t_ws = trans + rot.apply(mount[:3, 3])
     used = np.ones(idx.size, bool)
+    keep = _static_test(seq, trajectory, ts[idx], job, src)
 
     def frames() -> Iterable[np.ndarray | None]:
         for k, i in enumerate(idx):
             f = stream.read_or_skip(int(i))    # a bad frame is reported and left out
             used[k] = f is not None
-            yield f if f is None or convert is None else convert(f)
+            f = f if f is None or convert is None else convert(f)
+            yield f if f is None or keep is None else f[keep(f, k)]
 
+    vel = None
+    if src == "heatmaps" and job.static_gate is not None:
+        vel = sensor_velocities(trajectory, ts[idx], mount)
     m = occupancy_from_frames(frames(), r_ws, t_ws, frame_evidence(model, settings), settings,
-                              progress)
+                              progress, vel)
     return OccupancyResult(m, job, idx[used], ts[idx[used]], src)

@@ -79,19 +79,24 @@ class OccupancyGrid2D:
 def occupancy_grid(m: OccupancyMap, z_min: float, z_max: float, margin: int = 2
                    ) -> OccupancyGrid2D:
     """The 2-D grid of the map's voxels whose centres lie in ``[z_min, z_max)`` [m]
-    (module docstring); ``margin`` unknown cells round the known ones."""
+    (module docstring); it spans every voxel of the band with evidence, and ``margin``
+    unknown cells round them."""
     if not (math.isfinite(z_min) and math.isfinite(z_max) and z_min < z_max):
         raise SettingsError(f"expected a height band z_min < z_max [m], got {z_min}, {z_max}")
     ijk = m.indices()
     st = m.states()
     zc = (ijk[:, 2] + 0.5) * m.voxel
-    sel = (zc >= z_min) & (zc < z_max) & (st != UNKNOWN)
+    band = (zc >= z_min) & (zc < z_max)
+    # The extent is that of every voxel with evidence in the band, unknown ones too: a map of
+    # one frame (nothing yet certain) still shows the area the sensor looked at.
+    seen = ijk[band, :2]
+    sel = band & (st != UNKNOWN)
     ij, st = ijk[sel, :2], st[sel]
-    if ij.shape[0] == 0:
+    if seen.shape[0] == 0:
         return OccupancyGrid2D(np.full((1, 1), UNKNOWN, np.int8), np.zeros(2, np.int64),
                                m.voxel, (float(z_min), float(z_max)))
-    lo = ij.min(axis=0) - margin
-    dims = ij.max(axis=0) - lo + 1 + margin
+    lo = seen.min(axis=0) - margin
+    dims = seen.max(axis=0) - lo + 1 + margin
     states = np.full((int(dims[1]), int(dims[0])), UNKNOWN, np.int8)
     free = ij[st == FREE] - lo
     states[free[:, 1], free[:, 0]] = FREE

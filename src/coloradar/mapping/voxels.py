@@ -82,9 +82,9 @@ class OccupancySettings:
     p_miss: float = 0.45
     p_min: float = 0.12
     p_max: float = 0.97
-    p_occupied: float = 0.55
+    p_occupied: float = 0.52
     p_free: float = 0.3
-    min_hits: int = 3
+    min_hits: int = 2
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.voxel) and self.voxel > 0):
