@@ -16,9 +16,11 @@ its calibrated rotation, and per radar clouds of
   2–8° above boresight, range rates folded at its 2.45 m/s;
 - cascade: 5 Hz, 40–120 points, azimuth 0.5–1.5°, elevation 1–2.5°.
 
-Methods per run: the filter with the tightly coupled Doppler-point update (the default), the
-filter with the RANSAC ego-velocity update (``--update ego-velocity``, the loosely coupled
-baseline), dead reckoning with the gyro attitude and with the ground-truth attitude (the
+Methods per run: the filter with the tightly coupled Doppler-point update (the default; every
+radar's points in 3-D), the filter with the RANSAC ego-velocity update (``--update
+ego-velocity``, the loosely coupled baseline), the filter with the single chip planar
+(``planar``: the default before issue 42, ``DopplerConfig(planar=None)``), dead reckoning
+with the gyro attitude and with the ground-truth attitude (the
 reference of what the radar alone carries). Figures: ATE (SE(3)-aligned RMSE) and final
 error (first poses put on the truth's) as % of the distance; and, for the filter, the mean
 NEES of position, velocity and attitude per degree of freedom over the output poses.
@@ -59,7 +61,6 @@ from coloradar.odometry import (
     radar_inertial_odometry,
     rio_odometry,
 )
-from coloradar.odometry.doppler import DopplerConfig
 from coloradar.odometry.metrics import final_position_error
 from coloradar.odometry.pipeline import ego_velocity_config
 from coloradar.sim.doppler_clouds import CloudModel, simulate_clouds
@@ -213,9 +214,8 @@ def _score(traj: Trajectory, gt: Trajectory) -> tuple[float, float, float]:
             100.0 * abs(dz) / fin.path_length)
 
 
-MODEL_PLANAR = {"doppler": DopplerConfig(planar=None)}
-"""The default before issue 42: the Doppler-point update planar for the single chip (its
-``v_z`` held near 0), 3-D for the cascade; run beside the default (3-D for every radar)."""
+# "planar": the default before issue 42, the Doppler-point update planar for the single chip
+# (its v_z held near 0) and 3-D for the cascade; run beside the default (3-D for every radar).
 
 
 def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:
@@ -270,7 +270,7 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
              oracle: frozenset[str] = frozenset()) -> dict[str, tuple]:
     """Per method: (ATE %, final %, NEES p/v/θ per dof or NaN, seconds, final vertical %);
     the filters with the settings ``base`` (default :class:`RioConfig`) and either update,
-    the filter with the single chip planar (:data:`MODEL_PLANAR`); every method told the truths
+    the filter with the single chip planar; every method told the truths
     in ``oracle`` (:func:`told`)."""
     base = base or RioConfig()
     imu, calib = told(run, oracle)
@@ -283,7 +283,7 @@ def evaluate(run: SimRun, radars: tuple[str, ...], base: RioConfig | None = None
     out: dict[str, tuple] = {}
     for name, rcfg, pts in (("doppler", replace(base, update="doppler"), clouds),
                             ("ego-velocity", replace(base, update="ego-velocity"), None),
-                            ("planar", replace(base, **MODEL_PLANAR), clouds)):
+                            ("planar", replace(base, doppler=replace(base.doppler, planar=None)), clouds)):
         t0 = time.perf_counter()
         res = rio_odometry(tracks, calib, run.imu_t, imu, config=rcfg, initial_pose=run.gt,
                            points=pts)

@@ -21,9 +21,11 @@ from coloradar.mapping import (
     OCCUPIED,
     UNKNOWN,
     HeatmapModel,
+    OccupancyJob,
     OccupancyMap,
     OccupancySettings,
     PointSensorModel,
+    build_occupancy_map,
     grid_iou,
     heatmap_evidence,
     map_quality,
@@ -330,3 +332,17 @@ def test_map_refuses_a_source_with_a_point_file_name(small_run, tmp_path, capsys
     code, _, err = _cli(["map", small_run / RUN, "--out", tmp_path / "m.ply", "--source",
                          "points"], capsys)
     assert code == 1 and "folder name" in err
+
+
+def test_build_tests_every_mapped_radar_frame_and_not_the_lidar(small_run):
+    from coloradar.geometry import trajectory_from_groundtruth
+
+    seq = cr.open_sequence(small_run / RUN)
+    gt = trajectory_from_groundtruth(seq)
+    res = build_occupancy_map(seq, gt, OccupancyJob(sensor="single_chip"))
+    assert res.static_test is not None
+    assert res.static_test["frames"] == res.frame_indices.size > 0
+    assert res.static_test["points"] > 0
+    off = build_occupancy_map(seq, gt, OccupancyJob(sensor="single_chip", static_gate=None))
+    assert off.static_test is None
+    assert build_occupancy_map(seq, gt, OccupancyJob(sensor="lidar")).static_test is None

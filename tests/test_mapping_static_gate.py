@@ -16,10 +16,13 @@ from scipy.spatial.transform import Rotation
 from coloradar.errors import SettingsError
 from coloradar.geometry import Trajectory
 from coloradar.mapping import (
+    OCCUPIED,
+    UNKNOWN,
     OccupancyMap,
     OccupancySettings,
     PointSensorModel,
     StaticGate,
+    StaticTest,
     frame_evidence,
     occupancy_from_frames,
     sensor_velocities,
@@ -109,8 +112,67 @@ def test_a_person_walking_beside_the_rig_leaves_no_trail_in_the_map():
 
     plain = occupancy_from_frames(clouds, rot, trans, ev, s)
     gated = occupancy_from_frames(static_frames(clouds, np.tile(v_sensor, (times.size, 1)),
-                                                StaticGate(), 0.04, 2.5), rot, trans, ev, s)
+                                                StaticTest(StaticGate(), 0.04, 2.5)),
+                                  rot, trans, ev, s)
     assert person_voxels(plain) > 10               # without the test: a trail along y
     assert person_voxels(gated) == 0
     wall_gated = gated.occupied()
     assert wall_gated.shape[0] > 50 and np.all(np.abs(wall_gated[:, 0] - 5.0) < 0.3)
+
+
+def test_a_frame_whose_range_rates_are_not_a_static_worlds_is_kept_whole_and_counted():
+    # A bag imported without a Doppler field: every range rate 0 while the rig moves.
+    rng = np.random.default_rng(5)
+    xyz = np.column_stack([rng.uniform(2, 8, 40), rng.uniform(-3, 3, 40), rng.uniform(-1, 1, 40)])
+    zeros = np.column_stack([xyz, np.ones(40), np.zeros(40)])
+    v = np.array([1.5, 0.0, 0.0])
+    test = StaticTest(StaticGate(), 0.04, 2.5)
+    assert static_mask(zeros, v, StaticGate(), 0.04, 2.5).mean() < 0.3   # the bare test
+    assert test(zeros, v).all()                                          # kept whole
+    u = xyz / np.linalg.norm(xyz, axis=1, keepdims=True)
+    good = np.column_stack([xyz, np.ones(40), -(u @ v)])
+    good[:5, 4] += 1.0                                                   # five movers
+    keep = test(good, v)
+    assert keep.sum() == 35 and not keep[:5].any()
+    assert test.summary() == {"frames": 2, "frames_kept_whole": 1, "points": 80,
+                              "points_dropped": 5}
+    assert "kept 1 of 2 frames whole" in (test.warning() or "")
+    # at rest nothing is kept whole: movers are all a still rig's points can fail on
+    rest = StaticTest(StaticGate())
+    moving_things = np.column_stack([xyz, np.ones(40), np.full(40, 0.8)])
+    assert not rest(moving_things, np.zeros(3)).any() and rest.warning() is None
+
+
+def test_heatmap_returns_of_a_mover_are_left_out_with_the_sensors_velocity():
+    from coloradar.calib import HeatmapConfig
+    from coloradar.mapping import HeatmapModel, heatmap_evidence
+
+    # One elevation row, 9 beams; a static target at (2 m, beam 4) and a mover at (3 m, beam 6)
+    # whose range rate is 0 while the rig moves forward at 1 m/s.
+    nr, na = 40, 9
+    az = np.linspace(-0.4, 0.4, na)
+    cfg = HeatmapConfig(num_range_bins=nr, num_elevation_bins=1, num_azimuth_bins=na,
+                        range_bin_width=0.1, azimuth_bins=az, elevation_bins=np.zeros(1))
+    pm = PointSensorModel(range_std=0.05, azimuth_resolution=0.25, elevation_resolution=1.0)
+    s = OccupancySettings(voxel=0.1)
+    v = np.array([1.0, 0.0, 0.0])
+    rng = np.random.default_rng(2)
+    h = np.zeros((1, na, nr, 2), np.float32)
+    h[..., 0] = rng.exponential(1.0, (32, 1, na, nr)).max(axis=0)
+    h[0, 4, 20, 0], h[0, 4, 20, 1] = 1000.0, -math.cos(az[4]) * 1.0     # static: -u·v
+    h[0, 6, 30, 0], h[0, 6, 30, 1] = 1000.0, 0.0                         # the mover
+    static_pt = np.array([[2.0 * math.cos(az[4]), 2.0 * math.sin(az[4]), 0.0]])
+    mover_pt = np.array([[3.0 * math.cos(az[6]), 3.0 * math.sin(az[6]), 0.0]])
+
+    def occupied_after(model, velocity):
+        m = OccupancyMap(s)
+        for _ in range(5):
+            m.integrate(*heatmap_evidence(h, np.eye(3), np.zeros(3), model, s, velocity))
+        return m.state(static_pt)[0], m.state(mover_pt)[0]
+
+    test = StaticTest(StaticGate(), 0.04, 2.5, min_points=1)
+    gated = HeatmapModel(cfg, pm, stride=1, static_test=test)
+    assert occupied_after(gated, v) == (OCCUPIED, UNKNOWN)
+    assert test.summary()["points_dropped"] == 5
+    assert occupied_after(gated, None) == (OCCUPIED, OCCUPIED)        # no velocity, no test
+    assert occupied_after(HeatmapModel(cfg, pm, stride=1), v) == (OCCUPIED, OCCUPIED)

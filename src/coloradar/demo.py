@@ -368,6 +368,7 @@ def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
     from .mapping import (
         OccupancySettings,
         StaticGate,
+        StaticTest,
         frame_evidence,
         occupancy_from_frames,
         occupancy_grid,
@@ -387,7 +388,7 @@ def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
     w = run.calib.single_chip.waveform
     clouds = static_frames([c for c, k in zip(run.clouds, keep, strict=True) if k],
                            sensor_velocities(res.trajectory, run.timestamps[keep], b_T_r),
-                           StaticGate(), w.velocity_bin_width, w.max_velocity)
+                           StaticTest(StaticGate(), w.velocity_bin_width, w.max_velocity))
     occ = occupancy_from_frames(clouds, m[:, :3, :3], m[:, :3, 3],
                                 frame_evidence(radar_sensor_model(run.calib.single_chip), s), s)
     grid = occupancy_grid(occ, *default_band(res.trajectory))

@@ -75,9 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rerun", action="store_true",
                    help="occupancy map: also write map.rrd (needs the extra [rerun])")
     p.add_argument("--keep-movers", action="store_true",
-                   help="occupancy map: map every radar point (default: leave out the points "
-                        "whose range rates a static world does not explain, movers and ghosts; "
-                        "the sensor's velocity from the poses)")
+                   help="occupancy map: map every radar point or heatmap return (default: "
+                        "leave out those whose range rates a static world does not explain, "
+                        "movers and ghosts; the sensor's velocity from the poses); the lidar "
+                        "is never tested")
     p.add_argument("--ascii", action="store_true", help="point map: write ascii instead of binary")
     add_file_output_args(p)
     add_quiet_arg(p)
@@ -204,7 +205,11 @@ def _occupancy_map(args: argparse.Namespace) -> int:
             "frames_mapped": int(res.frame_indices.size), "seconds": round(seconds, 3),
             "settings": asdict(settings),
             "job": {**{k: getattr(job, k) for k in ("start", "duration", "stride", "max_range")},
-                    "static_gate": None if job.static_gate is None else asdict(job.static_gate)}}
+                    "static_gate": None if job.static_gate is None or job.sensor == "lidar"
+                    else asdict(job.static_gate)},
+            "static_test": res.static_test}
+    if res.static_test is not None and res.static_test["warning"]:
+        print(f"warning: {res.static_test['warning']}", file=sys.stderr)
     written = write_map_folder(targets, res.map, grid, poses, info)
     written += _extras(args, targets, res, grid, poses)
     if not args.quiet:

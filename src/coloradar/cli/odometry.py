@@ -84,10 +84,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--min-inliers", type=int_in(3),
                    help="fewest static points per frame (at least 3; default 6)")
     p.add_argument("--model", choices=("auto", "3d", "planar"), default="auto",
-                   help="estimate vx vy vz (3d) or vx vy with vz = 0 (planar: for a rig that "
-                        "is truly planar); auto (default): the filter's Doppler-point update "
-                        "is 3d for every radar, the per-frame ego-velocities are planar for a "
-                        "radar with fewer than 3 elevation rows (the single chip)")
+                   help="estimate vx vy vz (3d) or vx vy with vz held near 0 (planar: this "
+                        "radar, for a rig that truly stays in its plane; the single chip's "
+                        "default before issue 42); auto (default): the filter's Doppler-point "
+                        "update is 3d for every radar, the per-frame ego-velocities are planar "
+                        "for a radar with fewer than 3 elevation rows (the single chip)")
     p.add_argument("--update", choices=UPDATES, default="doppler",
                    help="filter: every Doppler point a measurement, gated point by point "
                         "(doppler, default) or one RANSAC ego-velocity per frame "
@@ -120,7 +121,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = ego_velocity_config(seq.calib.radar(args.radar), **overrides)
     base = RioConfig()
     k = args.imu_noise_scale
-    planar = base.doppler.planar if args.model == "auto" else args.model == "planar"
+    # planar: the named radar's ego-velocities planar and each radar's Doppler points as its
+    # ego-velocity model (the default before issue 42); 3d: every radar's points in 3-D.
+    planar = {"auto": base.doppler.planar, "planar": None, "3d": False}[args.model]
     rio = replace(base, estimate_time_offset=not args.no_time_offset,
                   update=args.update, doppler=replace(base.doppler, planar=planar),
                   time_offset=args.time_offset,

@@ -29,7 +29,7 @@ from .sensor_model import (
     point_evidence,
     radar_sensor_model,
 )
-from .static_gate import StaticGate, sensor_velocities, static_frames, static_mask
+from .static_gate import StaticGate, StaticTest, sensor_velocities, static_frames, static_mask
 from .voxels import FREE, OCCUPIED, UNKNOWN, OccupancyMap, OccupancySettings
 
 __all__ = [
@@ -46,6 +46,7 @@ __all__ = [
     "OccupancySettings",
     "PointSensorModel",
     "StaticGate",
+    "StaticTest",
     "build_occupancy_map",
     "format_map_quality",
     "frame_evidence",

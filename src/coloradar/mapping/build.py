@@ -20,7 +20,7 @@ from ..geometry import Trajectory, sensor_to_base
 from ..geometry.timesync import window_indices
 from .heatmap_model import HeatmapModel, heatmap_evidence
 from .sensor_model import PointSensorModel, lidar_sensor_model, point_evidence, radar_sensor_model
-from .static_gate import StaticGate, sensor_velocities, static_mask
+from .static_gate import StaticGate, StaticTest, sensor_velocities
 from .voxels import OccupancyMap, OccupancySettings
 
 __all__ = ["MAP_INPUTS", "OccupancyJob", "OccupancyResult", "build_occupancy_map",
@@ -103,6 +103,9 @@ class OccupancyResult:
         int64 and float64 ``(F,)``: the frames used (stream indices, stamps [s]).
     points_from
         The stream read: ``"pointclouds"``, ``"adc"`` or ``"heatmaps"``.
+    static_test
+        The static test's counts (:meth:`~.static_gate.StaticTest.summary`) and its warning
+        (``"warning"``, or None), or None when no test ran.
     """
 
     map: OccupancyMap
@@ -110,6 +113,7 @@ class OccupancyResult:
     frame_indices: np.ndarray
     timestamps: np.ndarray
     points_from: str
+    static_test: dict[str, Any] | None = None
 
 
 def occupancy_from_frames(frames: Iterable[np.ndarray | None], rotations: np.ndarray,
@@ -134,7 +138,8 @@ def occupancy_from_frames(frames: Iterable[np.ndarray | None], rotations: np.nda
         Called as ``progress(done, total)`` after each frame.
     velocities
         float ``(F, 3)``: the sensor's velocity at each frame [m/s], sensor frame (for a
-        heatmap model's static test, :class:`~.heatmap_model.HeatmapModel`).
+        heatmap model's static test, :class:`~.heatmap_model.HeatmapModel`; a point model's
+        frames are tested before, :class:`~.static_gate.StaticTest`).
     """
     m = OccupancyMap(settings)
     n = len(translations)
@@ -154,7 +159,8 @@ def frame_evidence(model: PointSensorModel | HeatmapModel,
     """The ``evidence`` function of :func:`occupancy_from_frames` for a sensor model."""
     if isinstance(model, HeatmapModel):
         return lambda f, r, t, v=None: heatmap_evidence(f, r, t, model, settings, v)
-    return lambda f, r, t: point_evidence(f, r, t, model, settings)
+    # Points are tested before they reach the evidence (a velocity is not needed here).
+    return lambda f, r, t, v=None: point_evidence(f, r, t, model, settings)
 
 
 def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | None, str,
@@ -175,11 +181,9 @@ def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | 
         radar = seq.radar(job.sensor)
         points = radar_sensor_model(rc, min_azimuth_std=job.min_azimuth_std_deg * _DEG,
                                     min_elevation_std=job.min_elevation_std_deg * _DEG)
-        w = rc.waveform
         model = HeatmapModel(radar.heatmap_config, points, max_range=job.max_range,
-                             **{"static_gate": job.static_gate,
-                                "velocity_bin_width": float(w.velocity_bin_width),
-                                "max_velocity": float(w.max_velocity), **dict(job.heatmap or {})})
+                             **{"static_test": _static_test(seq, job),
+                                **dict(job.heatmap or {})})
         return radar.heatmaps, None, "heatmaps", model
     from ..dsp.points import radar_point_stream
 
@@ -197,16 +201,12 @@ def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | 
     return stream, convert, src, pm
 
 
-def _static_test(seq, trajectory: Trajectory, times: np.ndarray, job: OccupancyJob, src: str
-                 ) -> Callable[[np.ndarray, int], np.ndarray] | None:
-    """``keep(cloud, k)``: the static test of frame ``k``'s points, or None (no test)."""
-    if job.static_gate is None or job.sensor == "lidar" or src == "heatmaps":
+def _static_test(seq, job: OccupancyJob) -> StaticTest | None:
+    """The static test of a radar's frames (None: none asked for, or the lidar)."""
+    if job.static_gate is None or job.sensor == "lidar":
         return None
     w = seq.calib.radar(job.sensor).waveform
-    gate = job.static_gate
-    vel = sensor_velocities(trajectory, times, sensor_to_base(seq.calib, job.sensor).matrix())
-    return lambda cloud, k: static_mask(cloud, vel[k], gate, float(w.velocity_bin_width),
-                                        float(w.max_velocity))
+    return StaticTest(job.static_gate, float(w.velocity_bin_width), float(w.max_velocity))
 
 
 def build_occupancy_map(seq, trajectory: Trajectory, job: OccupancyJob | None = None,
@@ -251,18 +251,20 @@ def build_occupancy_map(seq, trajectory: Trajectory, job: OccupancyJob | None = 
     r_ws = rot.as_matrix() @ mount[:3, :3]
     t_ws = trans + rot.apply(mount[:3, 3])
     used = np.ones(idx.size, bool)
-    keep = _static_test(seq, trajectory, ts[idx], job, src)
+    test = model.static_test if isinstance(model, HeatmapModel) else _static_test(seq, job)
+    vel = None if test is None else sensor_velocities(trajectory, ts[idx], mount)
 
     def frames() -> Iterable[np.ndarray | None]:
         for k, i in enumerate(idx):
             f = stream.read_or_skip(int(i))    # a bad frame is reported and left out
             used[k] = f is not None
             f = f if f is None or convert is None else convert(f)
-            yield f if f is None or keep is None else f[keep(f, k)]
+            if f is None or test is None or vel is None or isinstance(model, HeatmapModel):
+                yield f
+            else:
+                yield f[test(f, vel[k])]
 
-    vel = None
-    if src == "heatmaps" and job.static_gate is not None:
-        vel = sensor_velocities(trajectory, ts[idx], mount)
     m = occupancy_from_frames(frames(), r_ws, t_ws, frame_evidence(model, settings), settings,
-                              progress, vel)
-    return OccupancyResult(m, job, idx[used], ts[idx[used]], src)
+                              progress, vel if isinstance(model, HeatmapModel) else None)
+    summary = None if test is None else {**test.summary(), "warning": test.warning()}
+    return OccupancyResult(m, job, idx[used], ts[idx[used]], src, summary)

@@ -19,7 +19,7 @@ and the near-range coupling). A cell's SNR is its power over the floor of its ra
 - Cells nearer than ``min_range`` (coupling, the rig) say nothing.
 - **Movers and ghosts**: with the sensor's velocity, a return whose range rate (channel 1, the
   range rate of the cell's Doppler peak) a static world does not explain is left out
-  (:mod:`.static_gate`, ``static_gate``).
+  (:mod:`.static_gate`, ``static_test``); its beam's free space still ends at it.
 
 Cells are placed as :func:`coloradar.dsp.detect.heatmap_cell_xyz` places them (the one heatmap
 placement of coloradar).
@@ -36,7 +36,7 @@ from ..calib import HeatmapConfig
 from ..dsp.detect import heatmap_cell_xyz
 from ..errors import FormatError, SettingsError
 from .sensor_model import PointSensorModel, hit_evidence
-from .static_gate import StaticGate, static_mask
+from .static_gate import StaticTest
 from .voxels import OccupancySettings, local_unique_keys, logit
 
 __all__ = ["HeatmapModel", "heatmap_evidence"]
@@ -75,9 +75,10 @@ class HeatmapModel:
         Keep only the strongest elevation of each azimuth–range column: an array with few
         elevation rows (the cascade's) answers one return with several elevation lobes of
         nearly its strength, which would each become a return.
-    static_gate, velocity_bin_width, max_velocity
-        The static-world test of the returns (None: none) and the radar's Doppler bin [m/s]
-        and unambiguous range rate [m/s] it needs; applied when the frame's velocity is given.
+    static_test
+        The static-world test of the returns (:class:`~.static_gate.StaticTest`; None: none),
+        applied to a heatmap of shape ``(el, az, range, 2)`` (channel 1: the range rates)
+        when the frame's velocity is given. A dropped return still ends its beam's free space.
     """
 
     config: HeatmapConfig
@@ -92,9 +93,7 @@ class HeatmapModel:
     max_returns: int = 50
     elevation_peak: bool = True
     shadow_db: float | None = 3.0
-    static_gate: StaticGate | None = None
-    velocity_bin_width: float = 0.0
-    max_velocity: float | None = None
+    static_test: StaticTest | None = None
 
     def __post_init__(self) -> None:
         if not self.free_db < self.occupied_db:
@@ -177,7 +176,7 @@ def heatmap_evidence(heatmap: np.ndarray, rotation: np.ndarray, translation: np.
     settings
         The map's voxel and probabilities.
     velocity
-        float ``(3,)``: the radar's velocity [m/s], radar frame, for ``model.static_gate``
+        float ``(3,)``: the radar's velocity [m/s], radar frame, for ``model.static_test``
         (None: no static test).
 
     Returns
@@ -204,10 +203,9 @@ def heatmap_evidence(heatmap: np.ndarray, rotation: np.ndarray, translation: np.
     free_keys = local_unique_keys(free_pts, settings.voxel)
     peaks = np.column_stack([model.cells[occ].astype(np.float64), snr[occ]])
     h = np.asarray(heatmap)
-    if velocity is not None and model.static_gate is not None and h.ndim == 4:
+    if velocity is not None and model.static_test is not None and h.ndim == 4:
         rates = h[..., 1][occ].astype(np.float64)
-        peaks = peaks[static_mask(np.column_stack([peaks, rates]), velocity, model.static_gate,
-                                  model.velocity_bin_width, model.max_velocity)]
+        peaks = peaks[model.static_test(np.column_stack([peaks, rates]), velocity)]
     if peaks.shape[0] > model.max_returns:
         peaks = peaks[np.argpartition(-peaks[:, 3], model.max_returns)[:model.max_returns]]
     hit_keys, q = hit_evidence(peaks, np.asarray(rotation, np.float64),

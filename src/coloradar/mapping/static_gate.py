@@ -11,6 +11,12 @@ odometry's static-inlier rule) and the range-rate error a direction error makes 
 (``|v| · sin(direction_std)``, twice). Range rates folded at the radar's ``v_max`` are compared
 folded. Radar-mapping work segments static from moving detections this way (e.g. Kellner et
 al., "Instantaneous ego-motion estimation using Doppler radar", ITSC 2013, for the model).
+
+The test trusts the range rates. Where they are not a static world's — zeros from a bag
+without a Doppler field, a recorder's opposite sign, the release's cascade heatmaps (whose
+channel 1 was made with the wrong chirp-time units), poses of another run — most of a moving
+frame's points fail it; :class:`StaticTest` then keeps that frame whole and counts it, so
+that a map is never emptied by a test whose premise does not hold (the caller warns).
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ import numpy as np
 from ..errors import SettingsError
 from ..geometry import Trajectory
 
-__all__ = ["StaticGate", "sensor_velocities", "static_frames", "static_mask"]
+__all__ = ["StaticGate", "StaticTest", "sensor_velocities", "static_frames", "static_mask"]
 
 
 @dataclass(frozen=True)
@@ -128,10 +134,66 @@ def static_mask(cloud: np.ndarray, velocity: np.ndarray, gate: StaticGate,
     return np.abs(res) <= gate.tolerance(float(np.linalg.norm(v)), velocity_bin_width)
 
 
-def static_frames(clouds: list[np.ndarray], velocities: np.ndarray, gate: StaticGate,
-                  velocity_bin_width: float = 0.0, max_velocity: float | None = None
-                  ) -> list[np.ndarray]:
-    """Each frame's points that pass :func:`static_mask` (``velocities``: ``(F, 3)``, one per
-    cloud, :func:`sensor_velocities`)."""
-    return [np.asarray(c)[static_mask(c, v, gate, velocity_bin_width, max_velocity)]
-            for c, v in zip(clouds, velocities, strict=True)]
+class StaticTest:
+    """The static test of one radar's frames, with its counts (module docstring).
+
+    Parameters
+    ----------
+    gate
+        :class:`StaticGate`.
+    velocity_bin_width, max_velocity
+        The radar's Doppler bin [m/s] and unambiguous range rate [m/s] (None: not folded).
+    min_static
+        A moving frame (speed above the tolerance at rest) of at least ``min_points`` points
+        of which fewer than this share pass is kept whole: its range rates are not a static
+        world's (a scene with most of its returns on movers is not one a static map is made
+        of either).
+    min_points
+        Frames with fewer points are tested as they are.
+    """
+
+    def __init__(self, gate: StaticGate, velocity_bin_width: float = 0.0,
+                 max_velocity: float | None = None, min_static: float = 0.3,
+                 min_points: int = 8) -> None:
+        self.gate, self.velocity_bin_width, self.max_velocity = gate, velocity_bin_width, \
+            max_velocity
+        self.min_static, self.min_points = min_static, min_points
+        self.frames = self.frames_kept_whole = self.points = self.points_dropped = 0
+
+    def __call__(self, cloud: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """bool ``(N,)``: the points kept (:func:`static_mask`, or all of a frame whose range
+        rates are not a static world's)."""
+        keep = static_mask(cloud, velocity, self.gate, self.velocity_bin_width,
+                           self.max_velocity)
+        n = keep.size
+        self.frames += 1
+        self.points += n
+        moving = float(np.linalg.norm(velocity)) > self.gate.tolerance(0.0,
+                                                                      self.velocity_bin_width)
+        if moving and n >= self.min_points and keep.mean() < self.min_static:
+            self.frames_kept_whole += 1
+            return np.ones(n, bool)
+        self.points_dropped += int(n - keep.sum())
+        return keep
+
+    def summary(self) -> dict[str, int]:
+        """Frames tested, frames kept whole, points tested and points left out."""
+        return {"frames": self.frames, "frames_kept_whole": self.frames_kept_whole,
+                "points": self.points, "points_dropped": self.points_dropped}
+
+    def warning(self) -> str | None:
+        """A sentence for the user when more than a tenth of the frames were kept whole."""
+        if self.frames and self.frames_kept_whole > 0.1 * self.frames:
+            return (f"the static test kept {self.frames_kept_whole} of {self.frames} frames "
+                    "whole: most of their range rates are not a static world's (range rates "
+                    "all zero or of the opposite sign, heatmaps whose range rates were made "
+                    "with other chirp timings, or poses of another run); their movers and "
+                    "ghosts are mapped")
+        return None
+
+
+def static_frames(clouds: list[np.ndarray], velocities: np.ndarray,
+                  test: StaticTest) -> list[np.ndarray]:
+    """Each frame's points that ``test`` keeps (``velocities``: ``(F, 3)``, one per cloud,
+    :func:`sensor_velocities`)."""
+    return [np.asarray(c)[test(c, v)] for c, v in zip(clouds, velocities, strict=True)]

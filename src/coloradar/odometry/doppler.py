@@ -146,9 +146,10 @@ class DopplerConfig:
         Issue 42 measured both for the single chip (docs/odometry.md, "3-D single chip"): on
         runs written by another program, whose rigs rise and fall, 3-D with the noise
         measured from the data is far ahead (ATE 0.34 → 0.03 %, 0.60 → 0.10 %); on the
-        project's Monte Carlo planar is ahead where the rig keeps its height (handheld and
-        vehicle runs: 3-D drifts in height, median final 0.30 → 0.75 %) and behind on the
-        runs that rise and fall. A rig's floor is not known in advance; the default is 3-D.
+        project's Monte Carlo planar is ahead where the rig keeps its height (3-D drifts in
+        height: median final 0.23 → 0.77 % on the handheld runs, 0.26 → 1.10 % on the
+        vehicle runs) and behind on the runs that rise and fall. A rig's floor is not known
+        in advance; the default is 3-D.
     min_range
         Points closer than this are left out [m] (the rig, antenna leakage).
     noise_uncertainty
