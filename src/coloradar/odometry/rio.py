@@ -138,9 +138,11 @@ class RioConfig:
     zero_velocity
         The zero-velocity detector's settings.
     planar_vz_std
-        A planar radar (``v_z`` fixed at 0, the single chip's) updates its own ``v_z`` with
-        this standard deviation [m/s]: the planar model's assumption, held loosely, in either
-        update (the Doppler points' and the ego-velocity's). 5 cm/s: on the tuning runs of
+        A planar radar (``v_z`` fixed at 0: the single chip's ego-velocities, and its Doppler
+        points with ``--model planar``) updates its own ``v_z`` with this standard deviation
+        [m/s]: the planar model's assumption, held loosely, in either update (the Doppler
+        points' and the ego-velocity's; since issue 42 the single chip's Doppler points are
+        3-D by default and this applies to its ego-velocity updates only). 5 cm/s: on the tuning runs of
         ``benchmarks/mc_odometry.py`` 2, 5 and 10 cm/s gave the Doppler update median final
         errors of 0.18, 0.22 and 0.30 % and 5 cm/s the smaller worst case of the two best;
         the ego-velocity update, which had 10 cm/s, is no worse with it (docs/odometry.md).
