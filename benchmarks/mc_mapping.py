@@ -52,11 +52,11 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from coloradar.geometry import rig_velocity
 from coloradar.geometry.cloud_metrics import nearest_distances
 from coloradar.mapping import (
     OccupancyJob,
     OccupancySettings,
-    StaticGate,
     StaticTest,
     build_occupancy_map,
     grid_iou,
@@ -64,7 +64,6 @@ from coloradar.mapping import (
     occupancy_from_frames,
     occupancy_grid,
     radar_sensor_model,
-    sensor_velocities,
     static_frames,
 )
 from coloradar.mapping.build import frame_evidence
@@ -188,13 +187,12 @@ def single_chip(cache: Path, scene: str, seed: int, laps: float,
     keep = res.trajectory.covers(run.timestamps)          # frames SLAM placed
     m = res.trajectory.interpolate(run.timestamps[keep]).matrices() @ b_T_r
     model = radar_sensor_model(run.calib.radar("single_chip"))
-    w = run.calib.radar("single_chip").waveform
     t0 = time.perf_counter()
     mapped = [c for c, k in zip(clouds, keep, strict=True) if k]
     if static_gate:          # as `coloradar map` does: the sensor's velocity from SLAM's poses
-        mapped = static_frames(mapped, sensor_velocities(res.trajectory, run.timestamps[keep],
-                                                         b_T_r),
-                               StaticTest(StaticGate(), w.velocity_bin_width, w.max_velocity))
+        vel = rig_velocity(res.trajectory, run.timestamps[keep], calib=run.calib,
+                           sensor="single_chip").linear
+        mapped = static_frames(mapped, vel, StaticTest.for_radar(run.calib.radar("single_chip")))
     occ = occupancy_from_frames(mapped, m[:, :3, :3], m[:, :3, 3],
                                 frame_evidence(model, settings), settings)
     t_map = time.perf_counter() - t0

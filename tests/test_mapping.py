@@ -335,7 +335,8 @@ def test_map_refuses_a_source_with_a_point_file_name(small_run, tmp_path, capsys
 
 
 def test_build_tests_every_mapped_radar_frame_and_not_the_lidar(small_run):
-    from coloradar.geometry import trajectory_from_groundtruth
+    from coloradar.geometry import rig_velocity, trajectory_from_groundtruth
+    from coloradar.mapping import StaticTest
 
     seq = cr.open_sequence(small_run / RUN)
     gt = trajectory_from_groundtruth(seq)
@@ -343,6 +344,12 @@ def test_build_tests_every_mapped_radar_frame_and_not_the_lidar(small_run):
     assert res.static_test is not None
     assert res.static_test["frames"] == res.frame_indices.size > 0
     assert res.static_test["points"] > 0
+    # Frame by frame, each cloud with the velocity at its own stamp, counted again here.
+    test = StaticTest.for_radar(seq.calib.single_chip)
+    for i, t in zip(res.frame_indices, res.timestamps, strict=True):
+        v = rig_velocity(gt, np.array([t]), calib=seq.calib, sensor="single_chip").linear[0]
+        test(seq.single_chip.pointclouds[int(i)], v)
+    assert test.summary() == {k: res.static_test[k] for k in test.summary()}
     off = build_occupancy_map(seq, gt, OccupancyJob(sensor="single_chip", static_gate=None))
     assert off.static_test is None
     assert build_occupancy_map(seq, gt, OccupancyJob(sensor="lidar")).static_test is None

@@ -1,8 +1,9 @@
 """The static-world Doppler test of radar points (``coloradar.mapping.static_gate``).
 
 References written here: the range rate of a static point seen from a moving sensor,
-``ṙ = −uᵀv``, computed point by point in a loop; a trajectory whose velocity is known in closed
-form; a person walking beside the rig, whose points a map of the static world must not keep.
+``ṙ = −uᵀv``, computed point by point in a loop; a person walking beside the rig, whose points
+a map of the static world must not keep. (The sensor's velocity is
+:func:`coloradar.geometry.rig_velocity`'s, tested in ``test_geometry.py``.)
 """
 
 from __future__ import annotations
@@ -11,10 +12,8 @@ import math
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from coloradar.errors import SettingsError
-from coloradar.geometry import Trajectory
 from coloradar.mapping import (
     OCCUPIED,
     UNKNOWN,
@@ -25,7 +24,6 @@ from coloradar.mapping import (
     StaticTest,
     frame_evidence,
     occupancy_from_frames,
-    sensor_velocities,
     static_frames,
     static_mask,
 )
@@ -59,26 +57,6 @@ def test_a_folded_static_point_passes_and_a_cloud_without_rates_is_refused():
         static_mask(np.zeros((3, 4)), v, StaticGate())
     with pytest.raises(SettingsError):
         StaticGate(floor=0.0)
-
-
-def test_sensor_velocities_are_the_mounted_sensors_velocity_in_its_own_frame():
-    # The base turns at a constant rate about z while moving at a constant world velocity;
-    # the sensor sits 0.5 m ahead of the base, turned 90° about z.
-    t = np.linspace(0, 10, 1001)
-    w, v0 = 0.2, np.array([1.0, 0.5, 0.1])
-    rot = Rotation.from_euler("z", (w * t)[:, None])
-    traj = Trajectory(t, t[:, None] * v0, rot, "test")
-    mount = np.eye(4)
-    mount[:3, :3] = Rotation.from_euler("z", 90, degrees=True).as_matrix()
-    mount[:3, 3] = [0.5, 0.0, 0.0]
-    q = np.array([2.0, 5.0, 7.5])
-    got = sensor_velocities(traj, q, mount, h=1e-3)
-    for k, tk in enumerate(q):
-        r_wb = Rotation.from_euler("z", w * tk).as_matrix()
-        lever = r_wb @ mount[:3, 3]
-        v_world = v0 + np.cross([0.0, 0.0, w], lever)
-        expected = (r_wb @ mount[:3, :3]).T @ v_world
-        np.testing.assert_allclose(got[k], expected, atol=2e-3)
 
 
 def test_a_person_walking_beside_the_rig_leaves_no_trail_in_the_map():

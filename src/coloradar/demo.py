@@ -365,15 +365,14 @@ def _loop_closure(folder: Path, seed: int, pictures: bool, overwrite: bool) -> t
 def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
     """``map.png``: the occupancy grid (rig height ± 0.5 m) of every frame of the walk placed
     by SLAM's trajectory (the points a static world explains, as ``coloradar map`` does)."""
+    from .geometry import rig_velocity
     from .mapping import (
         OccupancySettings,
-        StaticGate,
         StaticTest,
         frame_evidence,
         occupancy_from_frames,
         occupancy_grid,
         radar_sensor_model,
-        sensor_velocities,
         static_frames,
     )
     from .mapping.output import default_band
@@ -384,11 +383,10 @@ def _map_picture(path: Path, run, res, overwrite: bool) -> Path:
     m = res.trajectory.interpolate(run.timestamps[keep]).matrices() @ \
         run.calib.transforms["single_chip"].matrix()
     s = OccupancySettings()
-    b_T_r = run.calib.transforms["single_chip"].matrix()
-    w = run.calib.single_chip.waveform
-    clouds = static_frames([c for c, k in zip(run.clouds, keep, strict=True) if k],
-                           sensor_velocities(res.trajectory, run.timestamps[keep], b_T_r),
-                           StaticTest(StaticGate(), w.velocity_bin_width, w.max_velocity))
+    vel = rig_velocity(res.trajectory, run.timestamps[keep], calib=run.calib,
+                       sensor="single_chip").linear
+    clouds = static_frames([c for c, k in zip(run.clouds, keep, strict=True) if k], vel,
+                           StaticTest.for_radar(run.calib.single_chip))
     occ = occupancy_from_frames(clouds, m[:, :3, :3], m[:, :3, 3],
                                 frame_evidence(radar_sensor_model(run.calib.single_chip), s), s)
     grid = occupancy_grid(occ, *default_band(res.trajectory))

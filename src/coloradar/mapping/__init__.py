@@ -29,7 +29,7 @@ from .sensor_model import (
     point_evidence,
     radar_sensor_model,
 )
-from .static_gate import StaticGate, StaticTest, sensor_velocities, static_frames, static_mask
+from .static_gate import StaticGate, StaticTest, static_frames, static_mask
 from .voxels import FREE, OCCUPIED, UNKNOWN, OccupancyMap, OccupancySettings
 
 __all__ = [
@@ -58,7 +58,6 @@ __all__ = [
     "occupancy_grid",
     "point_evidence",
     "radar_sensor_model",
-    "sensor_velocities",
     "static_frames",
     "static_mask",
     "write_map_server",

@@ -16,11 +16,11 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import MissingDataError, SettingsError
-from ..geometry import Trajectory, sensor_to_base
+from ..geometry import Trajectory, rig_velocity, sensor_to_base
 from ..geometry.timesync import window_indices
 from .heatmap_model import HeatmapModel, heatmap_evidence
 from .sensor_model import PointSensorModel, lidar_sensor_model, point_evidence, radar_sensor_model
-from .static_gate import StaticGate, StaticTest, sensor_velocities
+from .static_gate import StaticGate, StaticTest
 from .voxels import OccupancyMap, OccupancySettings
 
 __all__ = ["MAP_INPUTS", "OccupancyJob", "OccupancyResult", "build_occupancy_map",
@@ -205,8 +205,7 @@ def _static_test(seq, job: OccupancyJob) -> StaticTest | None:
     """The static test of a radar's frames (None: none asked for, or the lidar)."""
     if job.static_gate is None or job.sensor == "lidar":
         return None
-    w = seq.calib.radar(job.sensor).waveform
-    return StaticTest(job.static_gate, float(w.velocity_bin_width), float(w.max_velocity))
+    return StaticTest.for_radar(seq.calib.radar(job.sensor), job.static_gate)
 
 
 def build_occupancy_map(seq, trajectory: Trajectory, job: OccupancyJob | None = None,
@@ -251,20 +250,25 @@ def build_occupancy_map(seq, trajectory: Trajectory, job: OccupancyJob | None = 
     r_ws = rot.as_matrix() @ mount[:3, :3]
     t_ws = trans + rot.apply(mount[:3, 3])
     used = np.ones(idx.size, bool)
+    # A heatmap model tests its returns itself (given the velocities); points are tested here.
+    heat = isinstance(model, HeatmapModel)
     test = model.static_test if isinstance(model, HeatmapModel) else _static_test(seq, job)
-    vel = None if test is None else sensor_velocities(trajectory, ts[idx], mount)
+    vel = None
+    if test is not None and len(trajectory) >= 2:
+        vel = rig_velocity(trajectory, ts[idx], calib=seq.calib, sensor=job.sensor).linear
+    point_test = None if heat or vel is None else test
 
     def frames() -> Iterable[np.ndarray | None]:
         for k, i in enumerate(idx):
             f = stream.read_or_skip(int(i))    # a bad frame is reported and left out
             used[k] = f is not None
             f = f if f is None or convert is None else convert(f)
-            if f is None or test is None or vel is None or isinstance(model, HeatmapModel):
-                yield f
-            else:
-                yield f[test(f, vel[k])]
+            if f is not None and point_test is not None and vel is not None:
+                f = f[point_test(f, vel[k])]
+            yield f
 
     m = occupancy_from_frames(frames(), r_ws, t_ws, frame_evidence(model, settings), settings,
-                              progress, vel if isinstance(model, HeatmapModel) else None)
-    summary = None if test is None else {**test.summary(), "warning": test.warning()}
+                              progress, vel if heat else None)
+    summary = None if test is None or vel is None else \
+        {**test.summary(), "warning": test.warning()}
     return OccupancyResult(m, job, idx[used], ts[idx[used]], src, summary)

@@ -1,16 +1,18 @@
 """Keep the radar points a static world explains: the Doppler test of a moving sensor.
 
 A static scatterer in direction ``u`` (unit, sensor frame) seen from a sensor moving at ``v``
-(sensor frame, the velocity of its origin) has the range rate ``ṙ = −uᵀv``. A point whose
-range rate is far from that is a mover (a person, a cart) or a ghost whose Doppler does not
-belong to its direction; a map of the static world leaves it out, ray and all. The sensor's
-velocity comes from the trajectory that places the frames (the ground truth, the odometry's,
-SLAM's), by central differences. The test allows the Doppler's own error (``floor``: a bin's
-interpolation error, whichever is larger of ``floor`` and 0.75 of the radar's Doppler bin, the
-odometry's static-inlier rule) and the range-rate error a direction error makes at speed
-(``|v| · sin(direction_std)``, twice). Range rates folded at the radar's ``v_max`` are compared
-folded. Radar-mapping work segments static from moving detections this way (e.g. Kellner et
-al., "Instantaneous ego-motion estimation using Doppler radar", ITSC 2013, for the model).
+(sensor frame, the velocity of its origin) has the range rate ``ṙ = −uᵀv``
+(:func:`coloradar.geometry.static_range_rate`). A point whose range rate is far from that is a
+mover (a person, a cart) or a ghost whose Doppler does not belong to its direction; a map of
+the static world leaves it out, ray and all. The sensor's velocity comes from the trajectory
+that places the frames (the ground truth, the odometry's, SLAM's), by
+:func:`coloradar.geometry.rig_velocity`. The test allows the Doppler's own error (``floor``:
+a bin's interpolation error, whichever is larger of ``floor`` and 0.75 of the radar's Doppler
+bin, the rule of the odometry's static inliers, which sits above this layer) and the
+range-rate error a direction error makes at speed (``|v| · sin(direction_std)``, twice).
+Range rates folded at the radar's ``v_max`` are compared folded. Radar-mapping work segments
+static from moving detections this way (e.g. Kellner et al., "Instantaneous ego-motion
+estimation using Doppler radar", ITSC 2013, for the model).
 
 The test trusts the range rates. Where they are not a static world's — zeros from a bag
 without a Doppler field, a recorder's opposite sign, the release's cascade heatmaps (whose
@@ -26,10 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..calib import RadarCalib
 from ..errors import SettingsError
-from ..geometry import Trajectory
+from ..geometry import static_range_rate
 
-__all__ = ["StaticGate", "StaticTest", "sensor_velocities", "static_frames", "static_mask"]
+__all__ = ["StaticGate", "StaticTest", "static_frames", "static_mask"]
 
 
 @dataclass(frozen=True)
@@ -62,43 +65,6 @@ class StaticGate:
         return base + 2.0 * float(speed) * math.sin(math.radians(self.direction_std_deg))
 
 
-def sensor_velocities(trajectory: Trajectory, times: np.ndarray, base_T_sensor: np.ndarray,
-                      h: float = 0.05) -> np.ndarray:
-    """Velocity of the sensor's origin in the sensor's frame at ``times``.
-
-    Parameters
-    ----------
-    trajectory
-        ``world_T_base(t)``.
-    times
-        float64 ``(F,)`` [s], within the trajectory's span.
-    base_T_sensor
-        float ``(4, 4)``: the sensor's mounting.
-    h
-        Half the central difference's step [s] (clipped to the trajectory's span).
-
-    Returns
-    -------
-    numpy.ndarray
-        float64 ``(F, 3)`` [m/s].
-    """
-    t = np.asarray(times, np.float64)
-    lo = np.maximum(t - h, trajectory.start)
-    hi = np.minimum(t + h, trajectory.end)
-    dt = np.where(hi > lo, hi - lo, 1.0)
-    mount = np.asarray(base_T_sensor, np.float64)
-
-    def origin(tt: np.ndarray) -> np.ndarray:
-        p, r = trajectory.interpolate_arrays(tt)
-        return p + r.apply(mount[:3, 3])
-
-    v_world = (origin(hi) - origin(lo)) / dt[:, None]
-    v_world[hi <= lo] = 0.0
-    _, rot = trajectory.interpolate_arrays(t)
-    r_ws = rot.as_matrix() @ mount[:3, :3]
-    return np.einsum("nji,nj->ni", r_ws, v_world)
-
-
 def static_mask(cloud: np.ndarray, velocity: np.ndarray, gate: StaticGate,
                 velocity_bin_width: float = 0.0, max_velocity: float | None = None
                 ) -> np.ndarray:
@@ -109,7 +75,8 @@ def static_mask(cloud: np.ndarray, velocity: np.ndarray, gate: StaticGate,
     cloud
         float ``(N, 5)``: x y z [m], intensity, range rate [m/s] (sensor frame).
     velocity
-        float ``(3,)``: the sensor's velocity [m/s], sensor frame (:func:`sensor_velocities`).
+        float ``(3,)``: the sensor's velocity [m/s], sensor frame
+        (:func:`coloradar.geometry.rig_velocity`).
     gate
         :class:`StaticGate`.
     velocity_bin_width, max_velocity
@@ -125,9 +92,7 @@ def static_mask(cloud: np.ndarray, velocity: np.ndarray, gate: StaticGate,
         raise SettingsError(f"the static test needs range rates: a cloud of shape (N, >=5), "
                             f"got {c.shape}")
     v = np.asarray(velocity, np.float64)
-    r = np.linalg.norm(c[:, :3], axis=1)
-    u = c[:, :3] / np.maximum(r, 1e-9)[:, None]
-    res = c[:, 4] + u @ v
+    res = c[:, 4] - static_range_rate(c[:, :3], v)        # NaN at the origin: not kept
     if max_velocity:
         span = 2.0 * float(max_velocity)
         res = res - span * np.round(res / span)
@@ -159,6 +124,12 @@ class StaticTest:
             max_velocity
         self.min_static, self.min_points = min_static, min_points
         self.frames = self.frames_kept_whole = self.points = self.points_dropped = 0
+
+    @classmethod
+    def for_radar(cls, radar: RadarCalib, gate: StaticGate | None = None) -> StaticTest:
+        """The test of a radar's frames with its Doppler bin and ``v_max`` (default gate)."""
+        w = radar.waveform
+        return cls(gate or StaticGate(), float(w.velocity_bin_width), float(w.max_velocity))
 
     def __call__(self, cloud: np.ndarray, velocity: np.ndarray) -> np.ndarray:
         """bool ``(N,)``: the points kept (:func:`static_mask`, or all of a frame whose range
@@ -195,5 +166,5 @@ class StaticTest:
 def static_frames(clouds: list[np.ndarray], velocities: np.ndarray,
                   test: StaticTest) -> list[np.ndarray]:
     """Each frame's points that ``test`` keeps (``velocities``: ``(F, 3)``, one per cloud,
-    :func:`sensor_velocities`)."""
+    :func:`coloradar.geometry.rig_velocity`)."""
     return [np.asarray(c)[test(c, v)] for c, v in zip(clouds, velocities, strict=True)]
