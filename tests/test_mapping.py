@@ -353,3 +353,26 @@ def test_build_tests_every_mapped_radar_frame_and_not_the_lidar(small_run):
     off = build_occupancy_map(seq, gt, OccupancyJob(sensor="single_chip", static_gate=None))
     assert off.static_test is None
     assert build_occupancy_map(seq, gt, OccupancyJob(sensor="lidar")).static_test is None
+
+
+def test_the_angle_floor_follows_each_radars_aperture():
+    """TI's MMWCAS cascade spans 86 distinct azimuth positions of half a wavelength (a beam of
+    asin(2/86) = 1.33°), the AWR1843 8 (14.5°): the cascade's floor is 0.4 of its beam, the
+    single chip keeps the caps, and a job's explicit floor wins."""
+    from coloradar.calib import preset_calibration
+    from coloradar.mapping import angle_std_floor, radar_sensor_model
+    from coloradar.mapping.build import _floors
+
+    calib = preset_calibration()
+    casc = radar_sensor_model(calib.radar("cascade"))
+    assert casc.min_azimuth_std == pytest.approx(0.4 * math.asin(2 / 86))
+    assert math.degrees(casc.min_azimuth_std) == pytest.approx(0.533, abs=1e-3)
+    assert casc.min_elevation_std == pytest.approx(2 * DEG)        # 4 rows: 0.4·30° > cap
+    chip = radar_sensor_model(calib.radar("single_chip"))
+    assert (chip.min_azimuth_std, chip.min_elevation_std) == pytest.approx((1 * DEG, 2 * DEG))
+    assert angle_std_floor(2.0, 1 * DEG) == pytest.approx(1 * DEG)  # a sine past 1 is capped
+    job = OccupancyJob(sensor="cascade", min_azimuth_std_deg=0.25)
+    f = _floors(job)
+    assert f["min_azimuth_std"] == pytest.approx(0.25 * DEG) and f["min_elevation_std"] is None
+    m = radar_sensor_model(calib.radar("cascade"), **f)
+    assert (m.min_azimuth_std, m.min_elevation_std) == pytest.approx((0.25 * DEG, 2 * DEG))

@@ -25,6 +25,7 @@ from .heatmap_model import HeatmapModel, heatmap_evidence
 from .quality import MapQuality, format_map_quality, map_quality
 from .sensor_model import (
     PointSensorModel,
+    angle_std_floor,
     lidar_sensor_model,
     point_evidence,
     radar_sensor_model,
@@ -47,6 +48,7 @@ __all__ = [
     "PointSensorModel",
     "StaticGate",
     "StaticTest",
+    "angle_std_floor",
     "build_occupancy_map",
     "format_map_quality",
     "frame_evidence",

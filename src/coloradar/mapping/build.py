@@ -51,7 +51,9 @@ class OccupancyJob:
     stride
         Every ``stride``-th frame.
     min_azimuth_std_deg, min_elevation_std_deg
-        Floors of a radar point's angle errors [deg] (:class:`~.sensor_model.PointSensorModel`).
+        Floors of a radar return's angle errors [deg] (:class:`~.sensor_model.PointSensorModel`;
+        None: the radar's own, :func:`~.sensor_model.angle_std_floor`: 1° and 2° for the
+        single chip, 0.53° and 2° for the cascade).
     max_range
         Returns beyond are left out [m] (None: the radar's unambiguous range; a lidar 15 m).
     processing
@@ -69,8 +71,8 @@ class OccupancyJob:
     start: float = 0.0
     duration: float | None = None
     stride: int = 1
-    min_azimuth_std_deg: float = 1.0
-    min_elevation_std_deg: float = 2.0
+    min_azimuth_std_deg: float | None = None
+    min_elevation_std_deg: float | None = None
     max_range: float | None = None
     processing: Mapping[str, Any] | None = None
     heatmap: Mapping[str, Any] | None = None
@@ -179,8 +181,7 @@ def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | 
                                    "'coloradar process RUN --out OUT' computes them from ADC "
                                    "frames, then open the run with products=OUT (--products OUT)")
         radar = seq.radar(job.sensor)
-        points = radar_sensor_model(rc, min_azimuth_std=job.min_azimuth_std_deg * _DEG,
-                                    min_elevation_std=job.min_elevation_std_deg * _DEG)
+        points = radar_sensor_model(rc, **_floors(job))
         model = HeatmapModel(radar.heatmap_config, points, max_range=job.max_range,
                              **{"static_test": _static_test(seq, job),
                                 **dict(job.heatmap or {})})
@@ -195,10 +196,16 @@ def _stream(seq, job: OccupancyJob) -> tuple[Any, Callable[[Any], np.ndarray] | 
                                f"{', '.join(have) or 'nothing'})")
     stream, convert = radar_point_stream(seq, job.sensor, src,  # type: ignore[arg-type]
                                          processing=job.processing)
-    pm = radar_sensor_model(rc, min_azimuth_std=job.min_azimuth_std_deg * _DEG,
-                            min_elevation_std=job.min_elevation_std_deg * _DEG,
-                            max_range=job.max_range)
+    pm = radar_sensor_model(rc, max_range=job.max_range, **_floors(job))
     return stream, convert, src, pm
+
+
+def _floors(job: OccupancyJob) -> dict[str, float | None]:
+    """The job's angle floors in radians, None where the radar's own apply."""
+    return {"min_azimuth_std": None if job.min_azimuth_std_deg is None
+            else job.min_azimuth_std_deg * _DEG,
+            "min_elevation_std": None if job.min_elevation_std_deg is None
+            else job.min_elevation_std_deg * _DEG}
 
 
 def _static_test(seq, job: OccupancyJob) -> StaticTest | None:

@@ -34,7 +34,7 @@ from ..errors import SettingsError
 from ..geometry.mapping import voxel_downsample
 from .voxels import OccupancySettings, local_unique_keys, logit, voxel_keys
 
-__all__ = ["PointSensorModel", "hit_evidence", "lidar_sensor_model", "merge_evidence",
+__all__ = ["PointSensorModel", "angle_std_floor", "hit_evidence", "lidar_sensor_model", "merge_evidence",
            "point_evidence", "radar_sensor_model", "ray_keys"]
 
 _DEG = math.pi / 180.0
@@ -107,16 +107,36 @@ class PointSensorModel:
         return az, el
 
 
-def radar_sensor_model(radar_calib, *, min_azimuth_std: float = 1.0 * _DEG,
-                       min_elevation_std: float = 2.0 * _DEG, snr_db: float | None = None,
+def angle_std_floor(resolution: float, cap: float) -> float:
+    """The floor of a radar's angle error [rad] for an array that resolves ``resolution``
+    (in the sine of the angle, ``2/N``): 0.4 of the resolution as an angle, at most ``cap``.
+
+    A return's angle is a peak on a grid of directions, and the calibration's phase errors
+    move it by a share of the beam: both scale with the beamwidth. The factor was chosen on
+    the mapping tuning runs (``benchmarks/mc_mapping.py``, seeds 101–103) from floors of
+    0.25–1° for the cascade (86 azimuth positions: 0.53°, where 1° thickened the walls of
+    its heatmap maps by a cell); the cap keeps the single chip's 1° in azimuth (8 positions:
+    0.4 of its 14° beam would blur every return) and 2° in elevation.
+    """
+    return float(min(cap, 0.4 * math.asin(min(1.0, resolution))))
+
+
+def radar_sensor_model(radar_calib, *, min_azimuth_std: float | None = None,
+                       min_elevation_std: float | None = None, snr_db: float | None = None,
                        max_range: float | None = None) -> PointSensorModel:
     """The :class:`PointSensorModel` of a radar from its calibration
     (:class:`coloradar.calib.RadarCalib`): half a range bin, the virtual array's resolution,
-    the unambiguous range (or ``max_range``)."""
+    the unambiguous range (or ``max_range``); the angle floors [rad] (None:
+    :func:`angle_std_floor` of the array's resolution, at most 1° in azimuth and 2° in
+    elevation)."""
     w = radar_calib.waveform
     v = radar_calib.antenna.virtual.unique_positions
     n_az = max(2, len(np.unique(v[:, 0])))
     n_el = max(2, len(np.unique(v[:, 1])))
+    if min_azimuth_std is None:
+        min_azimuth_std = angle_std_floor(2.0 / n_az, 1.0 * _DEG)
+    if min_elevation_std is None:
+        min_elevation_std = angle_std_floor(2.0 / n_el, 2.0 * _DEG)
     return PointSensorModel(range_std=w.range_bin_width / 2, azimuth_resolution=2.0 / n_az,
                             elevation_resolution=2.0 / n_el, min_azimuth_std=min_azimuth_std,
                             min_elevation_std=min_elevation_std, snr_db=snr_db,
