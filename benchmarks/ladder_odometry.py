@@ -13,8 +13,9 @@ from the base origin on rungs 3 and 4). Methods:
 - ``3d``: ``RioConfig(doppler=DopplerConfig(planar=False), extrinsic_rotation_axes="yaw")``
   with ``ego_velocity_config(..., planar=False)`` (``--model 3d``: the per-frame
   ego-velocities 3-D as well);
-- ``planar``: the default before issue 42 (``DopplerConfig(planar=None)``: the Doppler-point
-  update planar for the single chip, its ``v_z`` held near 0);
+- ``planar``: ``--model planar``, the default before issue 42 (``DopplerConfig(planar=None)``:
+  the Doppler-point update planar for the single chip, its ``v_z`` held near 0), its point
+  noise measured since;
 - ``loose``: ``RioConfig(update="ego-velocity")`` with the default ego-velocities;
 - ``loose 3d``: the ``3d`` filter with ``update="ego-velocity"`` and the 3-D ego-velocities
   (what the ladder's loosely coupled check compares with once the default is that variant);

@@ -19,7 +19,8 @@ its calibrated rotation, and per radar clouds of
 Methods per run: the filter with the tightly coupled Doppler-point update (the default; every
 radar's points in 3-D), the filter with the RANSAC ego-velocity update (``--update
 ego-velocity``, the loosely coupled baseline), the filter with the single chip planar
-(``planar``: the default before issue 42, ``DopplerConfig(planar=None)``), dead reckoning
+(``planar``: ``--model planar``, ``DopplerConfig(planar=None)``, the default before issue
+42, its point noise measured since), dead reckoning
 with the gyro attitude and with the ground-truth attitude (the
 reference of what the radar alone carries). Figures: ATE (SE(3)-aligned RMSE) and final
 error (first poses put on the truth's) as % of the distance; and, for the filter, the mean
@@ -214,8 +215,9 @@ def _score(traj: Trajectory, gt: Trajectory) -> tuple[float, float, float]:
             100.0 * abs(dz) / fin.path_length)
 
 
-# "planar": the default before issue 42, the Doppler-point update planar for the single chip
-# (its v_z held near 0) and 3-D for the cascade; run beside the default (3-D for every radar).
+# "planar": `--model planar` (the default before issue 42, its point noise measured since), the
+# Doppler-point update planar for the single chip (its v_z held near 0) and 3-D for the cascade;
+# run beside the default (3-D for every radar).
 
 
 def imu_prior(turn_on: float = 1.0, walk: float = 1.0) -> RioConfig:

@@ -85,10 +85,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="fewest static points per frame (at least 3; default 6)")
     p.add_argument("--model", choices=("auto", "3d", "planar"), default="auto",
                    help="estimate vx vy vz (3d) or vx vy with vz held near 0 (planar: this "
-                        "radar, for a rig that truly stays in its plane; the single chip's "
-                        "default before issue 42); auto (default): the filter's Doppler-point "
-                        "update is 3d for every radar, the per-frame ego-velocities are planar "
-                        "for a radar with fewer than 3 elevation rows (the single chip)")
+                        "radar, for a rig that truly stays in its plane, such as a wheeled "
+                        "vehicle; the single chip's default before issue 42); auto (default): "
+                        "the filter's Doppler-point update is 3d for every radar, the "
+                        "per-frame ego-velocities are planar for a radar with fewer than 3 "
+                        "elevation rows (the single chip)")
     p.add_argument("--update", choices=UPDATES, default="doppler",
                    help="filter: every Doppler point a measurement, gated point by point "
                         "(doppler, default) or one RANSAC ego-velocity per frame "

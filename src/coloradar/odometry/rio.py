@@ -173,8 +173,7 @@ class RioConfig:
     point_noise
         Per radar (in the order of the tracks) the points' noise; None: each radar's default
         (:func:`~coloradar.odometry.doppler.point_noise_for`). Where the noise is measured
-        (``noise_estimate``: by default for the radars whose points are used in 3-D), the
-        prior of that measurement.
+        (``noise_estimate``: by default for every radar), the prior of that measurement.
     vertical_prior
         A radar whose points are used in 3-D also updates its ``v_z ≈ 0`` with a standard
         deviation measured from its own frames (:class:`.noise_estimate.VerticalPrior`): the
@@ -536,10 +535,7 @@ def _setup(tracks: EgoVelocityTrack | Sequence[EgoVelocityTrack], calib: Calibra
         static.append(static_frames(np.linalg.norm(tr.velocity, axis=1), tr.ok, quiet, zv, st))
     return _Setup(cfg, tr_list, names, imu_t, imu_d, ekf, base_T_imu.inverse(), ext,
                   [e.translation for e in ext], planar, pts, noises,
-                  [PointNoiseEstimator(n, replace(
-                      cfg.noise_estimate, enabled=not d.planar
-                      if cfg.noise_estimate.enabled is None else cfg.noise_estimate.enabled))
-                   for n, d in zip(noises, dcfg, strict=True)],
+                  [PointNoiseEstimator(n, cfg.noise_estimate) for n in noises],
                   [VerticalPrior() for _ in noises], dcfg,
                   ext_yaw_only, static)
 
