@@ -34,8 +34,8 @@ from ..errors import SettingsError
 from ..geometry.mapping import voxel_downsample
 from .voxels import OccupancySettings, local_unique_keys, logit, voxel_keys
 
-__all__ = ["PointSensorModel", "angle_std_floor", "hit_evidence", "lidar_sensor_model", "merge_evidence",
-           "point_evidence", "radar_sensor_model", "ray_keys"]
+__all__ = ["PointSensorModel", "angle_std_floor", "hit_evidence", "lidar_sensor_model",
+           "merge_evidence", "point_evidence", "radar_sensor_model", "ray_keys"]
 
 _DEG = math.pi / 180.0
 
