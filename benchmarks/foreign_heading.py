@@ -44,7 +44,7 @@ from coloradar.odometry.pipeline import OdometryJob, ego_velocity_config, run_od
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 
 
-def gyro_bias_walk(seq, window: float) -> tuple[np.ndarray, np.ndarray]:
+def gyro_bias_against_truth(seq, window: float) -> tuple[np.ndarray, np.ndarray]:
     """The gyro's bias [rad/s, IMU axes] over consecutive ``window``-second spans, read against
     the ground truth (module docstring): span centres [s] ``(M,)`` and biases ``(M, 3)``."""
     imu, gt = seq.imu, seq.groundtruth
@@ -96,7 +96,7 @@ class _Run:
 
 def without_bias(seq, window: float):
     """A view of ``seq`` whose gyro has its bias, as read against the ground truth, removed."""
-    centres, biases = gyro_bias_walk(seq, window)
+    centres, biases = gyro_bias_against_truth(seq, window)
     t = np.asarray(seq.imu.timestamps, np.float64)
     bias = np.column_stack([np.interp(t, centres, biases[:, k]) for k in range(3)])
     data = np.array(seq.imu.data, dtype=np.float64, copy=True)

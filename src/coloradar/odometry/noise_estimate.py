@@ -50,12 +50,11 @@ class NoiseEstimateConfig:
     ----------
     enabled
         Measure the noise from the data (default, every radar and model); False: the prior
-        (the radar's stated accuracy or ``RioConfig.point_noise``) throughout; None: as
-        True (it meant "the 3-D radars only" before). The planar model kept its prior until
-        it was measured against the data (docs/odometry.md): with the noise measured, its
-        ATE on the ladder's vehicles with exact directions went from 0.08–0.11 % to
-        0.03–0.06 %, on the foreign clean run from 0.34 to 0.31 % (final 0.47 → 0.17 %),
-        and the Monte Carlo's stayed level.
+        (the radar's stated accuracy or ``RioConfig.point_noise``) throughout. The planar
+        model kept its prior until it was measured against the data (docs/odometry.md):
+        with the noise measured, its ATE on the ladder's vehicles with exact directions went
+        from 0.08–0.11 % to 0.03–0.06 %, on the foreign clean run from 0.34 to 0.31 % (final
+        0.47 → 0.17 %), and the Monte Carlo's stayed level.
     prior_points
         Weight of the prior, in points (per variance): until about this many informative
         points have been seen the prior dominates. 300: about fifteen frames of the single
@@ -64,7 +63,7 @@ class NoiseEstimateConfig:
         Floor of the estimated range-rate noise [m/s] (a Doppler bin is never exact).
     """
 
-    enabled: bool | None = True
+    enabled: bool = True
     prior_points: float = 300.0
     min_range_rate_std: float = 0.01
 
