@@ -31,9 +31,9 @@ lidar points the radar map observed) and F; the IoU of the 2-D grid's occupied c
 trajectory's median height ± 0.5 m) against the lidar's occupancy grid built with the same
 poses (lidar free space from lidar rays), over the cells the radar grid observed.
 
-The reported seeds (1000–1003) were never used to choose a setting; the occupancy settings
-were chosen on the tuning seeds 101–103 (ground-truth poses; 101 and 102 in the first
-version), the heatmap settings on 101 and 102.
+The reported seeds (1000–1003; for the cascade also 1004–1011) were never used to choose a
+setting; the occupancy settings were chosen on the tuning seeds 101–103 (ground-truth poses;
+101 and 102 in the first version), the heatmap settings on 101 and 102.
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 
     nice python benchmarks/scan_heading.py [--seeds 101 102 103] [--radars single_chip cascade]
                                            [--window 4] [--gap 4] [--cache /tmp/coloradar_mc_slam]
+    nice python benchmarks/scan_heading.py --run RUN [--calib DIR]   # a dataset run's clouds
 
 A radar-inertial filter cannot see heading (docs/odometry.md, "What limits the worst runs"); a
 heading source from the radar itself would be the rotation between scans. This measures what
@@ -13,6 +14,10 @@ poses — so only the registration is measured, not the odometry — and registe
 GICP, :func:`coloradar.slam.registration.register_points`) from the true relative pose turned
 by 1° (σ) in yaw and shifted by 5 cm (σ). Printed per run: the pairs registered, their
 points, the median fitness, and the yaw error's RMS, median |·| and 90th percentile [deg].
+
+``--run`` measures the same on a dataset run's own single-chip clouds and ground truth (e.g.
+the runs in ``../shared/foreign``, written by another program): the radar velocity that picks
+the static points is then the ground truth's, differentiated.
 """
 
 from __future__ import annotations
@@ -21,13 +26,14 @@ import argparse
 import sys
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from coloradar.geometry import SE3
+from coloradar.geometry import SE3, trajectory_from_groundtruth
 from coloradar.sim.doppler_clouds import radar_velocities
 from coloradar.sim.run import DEFAULT_START_TIME
 from coloradar.slam import SlamSettings
@@ -54,10 +60,36 @@ def _window(run, poses: np.ndarray, y: np.ndarray, t0: float, length: float
     return poses[idx[0]], (np.concatenate(pts) if pts else np.zeros((0, 3)))
 
 
+def dataset_run(path: str, calib: str | None) -> SimpleNamespace:
+    """A dataset run's single-chip clouds, ground truth and true radar velocities, with the
+    attributes :func:`yaw_errors` reads."""
+    from coloradar.dataset import open_sequence
+
+    seq = open_sequence(path, calib=calib)
+    stream = seq.single_chip.pointclouds
+    t = np.asarray(stream.timestamps, dtype=np.float64)
+    gt = trajectory_from_groundtruth(seq)
+    keep = (t > gt.timestamps[0] + 0.1) & (t < gt.timestamps[-1] - 0.1)
+    t = t[keep]
+    clouds = [stream[int(k)] for k in np.flatnonzero(keep)]
+    # The radar origin's velocity in its own frame from the ground truth, by central
+    # differences over ±50 ms.
+    b_t_r = seq.calib.transforms["single_chip"].matrix()
+    h = 0.05
+    m0, m1 = (gt.interpolate(t + d, tolerance=1.0).matrices() @ b_t_r for d in (-h, h))
+    m = gt.interpolate(t, tolerance=1.0).matrices() @ b_t_r
+    v_world = (m1[:, :3, 3] - m0[:, :3, 3]) / (2 * h)
+    y = np.einsum("nji,nj->ni", m[:, :3, :3], v_world)
+    return SimpleNamespace(calib=seq.calib, radar="single_chip", timestamps=t, clouds=clouds,
+                           groundtruth=gt, velocities=y, name=seq.name)
+
+
 def yaw_errors(run, window: float, gap: float, seed: int = 0) -> tuple[np.ndarray, list]:
     """Yaw errors [deg] of the registered pairs of one run, and (points, fitness) per pair."""
     b_t_r = run.calib.transforms[run.radar].matrix()
-    y = radar_velocities(run.trajectory, b_t_r, run.timestamps - DEFAULT_START_TIME)
+    y = getattr(run, "velocities", None)
+    if y is None:
+        y = radar_velocities(run.trajectory, b_t_r, run.timestamps - DEFAULT_START_TIME)
     poses = run.groundtruth.interpolate(run.timestamps, tolerance=1.0).matrices()
     rng = np.random.default_rng(seed)
     s = SlamSettings()
@@ -86,22 +118,34 @@ def main() -> None:
     ap.add_argument("--window", type=float, default=4.0)
     ap.add_argument("--gap", type=float, default=4.0)
     ap.add_argument("--cache", type=Path, default=Path("/tmp/coloradar_mc_slam"))
+    ap.add_argument("--run", nargs="+", help="dataset runs (folders or zips) instead")
+    ap.add_argument("--calib", help="calibration folder for --run")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
+    if args.run:
+        print(f"windows of {args.window} s, {args.gap} s apart; yaw error of the registration [deg]")
+        for path in args.run:
+            run = dataset_run(path, args.calib)
+            _report(run.name, *yaw_errors(run, args.window, args.gap))
+        return
     args.cache.mkdir(parents=True, exist_ok=True)
     print(f"windows of {args.window} s, {args.gap} s apart; yaw error of the registration [deg]")
     for radar in args.radars:
         for n, seed in enumerate(args.seeds):
             scene = SCENES[n % len(SCENES)]
             e, info = yaw_errors(_run(args.cache, scene, seed, 2.0, radar), args.window, args.gap)
-            if e.size == 0:
-                print(f"{radar:12s} {scene:10s} {seed:5d}: no pair registered")
-                continue
-            pts, fit = np.median([i[0] for i in info]), np.median([i[1] for i in info])
-            print(f"{radar:12s} {scene:10s} {seed:5d}: {e.size:3d} pairs, {pts:5.0f} points, "
-                  f"fitness {fit:.2f}; RMS {np.sqrt(np.mean(e**2)):6.2f}, median |.| "
-                  f"{np.median(np.abs(e)):5.2f}, 90th percentile {np.percentile(np.abs(e), 90):5.2f}",
-                  flush=True)
+            _report(f"{radar:12s} {scene:10s} {seed:5d}", e, info)
+
+
+def _report(label: str, e: np.ndarray, info: list) -> None:
+    """One line: the pairs registered, their median points and fitness, the yaw errors."""
+    if e.size == 0:
+        print(f"{label}: no pair registered")
+        return
+    pts, fit = np.median([i[0] for i in info]), np.median([i[1] for i in info])
+    print(f"{label}: {e.size:3d} pairs, {pts:5.0f} points, fitness {fit:.2f}; RMS "
+          f"{np.sqrt(np.mean(e**2)):6.2f}, median |.| {np.median(np.abs(e)):5.2f}, 90th "
+          f"percentile {np.percentile(np.abs(e), 90):5.2f}", flush=True)
 
 
 if __name__ == "__main__":

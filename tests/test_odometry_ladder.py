@@ -22,7 +22,11 @@ figures with the alternatives over several seeds. The single chip's default is 3
 42; with the planar model, rungs 1 and 3, a walk that rises and falls, failed the
 dead-reckoning check: ATE 0.21 % against 1.5 × 0.055 + 0.02). One check still fails and is a
 strict xfail (:data:`KNOWN_MISSES`): rung 2 (vehicle, exact directions) the loosely coupled
-check (0.058 % against 0.028 + 0.02). A strict xfail fails the day it passes.
+check (0.058 % against 0.028 + 0.02). The loosely coupled update's per-frame velocities are
+planar, the non-holonomic constraint this vehicle keeps; with 3-D velocities it is behind the
+default (``benchmarks/ladder_odometry.py --rungs 2``: 0.076 % against 0.058 %, median of 3
+seeds), and ``--model planar`` is level with it (docs/odometry.md, "Why issue 42 is
+blocked"). A strict xfail fails the day it passes.
 """
 
 from __future__ import annotations
@@ -232,8 +236,8 @@ RUNG_IDS = [f"{r}-{lad.RUNG_NAMES[r].replace(' ', '_')}" for r in lad.RUNGS]
 
 KNOWN_MISSES: dict[str, dict[int, str]] = {
     "dr": {},
-    "loose": {2: "issue 42 open: on a vehicle with exact directions the loosely coupled "
-                 "update beats the Doppler-point update"},
+    "loose": {2: "issue 42 (blocked): on a vehicle the loosely coupled update's planar "
+                 "velocities keep the non-holonomic constraint the 3-D default does not"},
 }
 
 
