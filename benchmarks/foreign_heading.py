@@ -132,9 +132,9 @@ def pitched(seq, degrees: float):
 
 
 def rest_reading(seq, gt) -> tuple[float, float, float, float]:
-    """The rest at the start (ground-truth speed < 2 cm/s): its length [s], the gyro's mean
-    z rate and its standard error [rad/s, IMU axes], and the end-of-run offset across the
-    path [m] that one standard error of the bias leaves (module docstring)."""
+    """The rest at the start (until 0.1 s before the ground truth first moves): its length [s],
+    the gyro's mean z rate and its standard error [rad/s, IMU axes], and the end-of-run offset
+    across the path [m] that one standard error of the bias leaves (module docstring)."""
     t = gt.timestamps
     speed = np.linalg.norm(np.gradient(gt.translations, t, axis=0), axis=1)
     # The rest ends 0.1 s before the truth first moves (0.1 mm/s): the rig turns before its

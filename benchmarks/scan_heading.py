@@ -17,7 +17,7 @@ points, the median fitness, and the yaw error's RMS, median |·| and 90th percen
 
 ``--run`` measures the same on a dataset run's own single-chip clouds and ground truth (e.g.
 the runs in ``../shared/foreign``, written by another program): the radar velocity that picks
-the static points is then the ground truth's, differentiated.
+the static points is then the ground truth's (:func:`coloradar.geometry.rig_velocity`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from coloradar.geometry import SE3, trajectory_from_groundtruth
+from coloradar.geometry import SE3, rig_velocity, trajectory_from_groundtruth
 from coloradar.sim.doppler_clouds import radar_velocities
 from coloradar.sim.run import DEFAULT_START_TIME
 from coloradar.slam import SlamSettings
@@ -72,14 +72,7 @@ def dataset_run(path: str, calib: str | None) -> SimpleNamespace:
     keep = (t > gt.timestamps[0] + 0.1) & (t < gt.timestamps[-1] - 0.1)
     t = t[keep]
     clouds = [stream[int(k)] for k in np.flatnonzero(keep)]
-    # The radar origin's velocity in its own frame from the ground truth, by central
-    # differences over ±50 ms.
-    b_t_r = seq.calib.transforms["single_chip"].matrix()
-    h = 0.05
-    m0, m1 = (gt.interpolate(t + d, tolerance=1.0).matrices() @ b_t_r for d in (-h, h))
-    m = gt.interpolate(t, tolerance=1.0).matrices() @ b_t_r
-    v_world = (m1[:, :3, 3] - m0[:, :3, 3]) / (2 * h)
-    y = np.einsum("nji,nj->ni", m[:, :3, :3], v_world)
+    y = rig_velocity(gt, t, calib=seq.calib, sensor="single_chip").linear   # radar frame
     return SimpleNamespace(calib=seq.calib, radar="single_chip", timestamps=t, clouds=clouds,
                            groundtruth=gt, velocities=y, name=seq.name)
 
