@@ -22,6 +22,15 @@ issue 40: voxels seen from ≥ 3 keyframes) is scored beside it. Scores at 0.1 a
   within 0.5 m of one of the scene's people or carts at that time left out) that have a map
   point within τ.
 
+**frontier** (``--scene courtyard`` by default): what any setting of the map's two occupancy
+thresholds can reach on one scene's single-chip runs. Each map is built once (default settings)
+and its voxels are thresholded again at every ``min_hits`` in 1–3 and ``p_occupied`` in
+0.50–0.70; printed per run, for the simulator's own clouds and the degraded ones, placed with
+the ground truth and with SLAM's poses, with the sensor model's default angle floors (1° / 2°)
+and with floors matched to the added noise (2° / 4°): the best completeness among the settings
+with precision ≥ 0.92, the best precision among those with completeness ≥ 0.85, and the default
+setting's precision / completeness, all at 0.3 m.
+
 **cascade**: full runs (``coloradar simulate``: ADC, heatmaps, lidar, ground truth) of the same
 scenes, 12 s each; maps with the ground-truth poses, from the cascade's heatmaps and from its
 point clouds (computed from ADC by ``coloradar.dsp``), both occupancy maps, and today's point
@@ -166,14 +175,103 @@ def _scores(points: np.ndarray, run, truth: np.ndarray) -> dict:
 
 
 def single_chip(cache: Path, scene: str, seed: int, laps: float,
-                settings: OccupancySettings, static_gate: bool = True) -> dict:
-    from coloradar.odometry import ego_velocity_config
+                settings: OccupancySettings, static_gate: bool = True,
+                floors_deg: tuple[float, float] | None = None) -> dict:
     from coloradar.odometry.metrics import absolute_trajectory_error
-    from coloradar.slam import slam_from_clouds
-    from coloradar.slam.frontend import FrontEndSettings
 
     run = _point_run(cache, scene, seed, laps)
     clouds = degrade(run.clouds, seed)
+    res = _slam(cache, run, clouds, scene, seed, laps)
+    b_T_r = run.calib.transforms["single_chip"].matrix()
+    keep = res["trajectory"].covers(run.timestamps)          # frames SLAM placed
+    m = res["trajectory"].interpolate(run.timestamps[keep]).matrices() @ b_T_r
+    model = radar_sensor_model(run.calib.radar("single_chip"), **(
+        {} if floors_deg is None else {"min_azimuth_std": floors_deg[0] * DEG,
+                                       "min_elevation_std": floors_deg[1] * DEG}))
+    t0 = time.perf_counter()
+    mapped = [c for c, k in zip(clouds, keep, strict=True) if k]
+    if static_gate:          # as `coloradar map` does: the sensor's velocity from SLAM's poses
+        vel = rig_velocity(res["trajectory"], run.timestamps[keep], calib=run.calib,
+                           sensor="single_chip").linear
+        mapped = static_frames(mapped, vel, StaticTest.for_radar(run.calib.radar("single_chip")))
+    occ = occupancy_from_frames(mapped, m[:, :3, :3], m[:, :3, 3],
+                                frame_evidence(model, settings), settings)
+    t_map = time.perf_counter() - t0
+    truth = returned_scatterers(run)
+    ate = absolute_trajectory_error(res["trajectory"], run.groundtruth).rmse
+    return {"scene": scene, "seed": seed, "laps": laps, "ate_m": ate,
+            "duration_s": float(run.timestamps[-1] - run.timestamps[0]),
+            "map_s": t_map, "slam_s": res["seconds"], "returned": len(truth),
+            "occupancy": _scores(occ.occupied(), run, truth),
+            "points": _scores(res["map_points"], run, truth)}
+
+
+# --- frontier: every occupancy threshold on one build ---------------------------------------
+
+FRONTIER_HITS = (1, 2, 3)
+FRONTIER_P = (0.50, 0.505, 0.51, 0.515, 0.52, 0.53, 0.55, 0.6, 0.7)
+
+
+def threshold_scores(occ, run, truth: np.ndarray, tau: float = 0.3) -> dict:
+    """Precision / completeness at ``tau`` of ``occ``'s voxels thresholded at every
+    ``(min_hits, p_occupied)`` of :data:`FRONTIER_HITS` × :data:`FRONTIER_P`."""
+    centers = occ.centers()
+    lo = occ.logodds()
+    hits = occ.counts()[0]
+    cand = lo > np.log(FRONTIER_P[0] / (1 - FRONTIER_P[0]))
+    c = centers[cand]
+    d_map = surface_distance(c, run.scene)
+    out = {}
+    for h in FRONTIER_HITS:
+        for p in FRONTIER_P:
+            k = (lo[cand] > np.log(p / (1 - p))) & (hits[cand] >= h)
+            if not k.any():
+                out[(h, p)] = (float("nan"), 0.0)
+                continue
+            d_ret = nearest_distances(truth, c[k])
+            out[(h, p)] = (float(np.mean(d_map[k] <= tau)), float(np.mean(d_ret <= tau)))
+    return out
+
+
+def frontier(cache: Path, scene: str, seed: int, laps: float) -> dict:
+    """The module docstring's **frontier** for one run: ``{(clouds, poses, floors): scores}``."""
+    run = _point_run(cache, scene, seed, laps)
+    degraded = degrade(run.clouds, seed)
+    slam = _slam(cache, run, degraded, scene, seed, laps)["trajectory"]
+    truth = returned_scatterers(run)
+    b_T_r = run.calib.transforms["single_chip"].matrix()
+    rc = run.calib.radar("single_chip")
+    settings = OccupancySettings()
+    out = {}
+    for clouds_name, clouds in (("own", [c.astype(np.float32) for c in run.clouds]),
+                                ("degraded", degraded)):
+        for poses_name, traj in (("ground truth", run.groundtruth), ("SLAM", slam)):
+            keep = traj.covers(run.timestamps)
+            m = traj.interpolate(run.timestamps[keep]).matrices() @ b_T_r
+            vel = rig_velocity(traj, run.timestamps[keep], calib=run.calib,
+                               sensor="single_chip").linear
+            mapped = static_frames([c for c, k in zip(clouds, keep, strict=True) if k], vel,
+                                   StaticTest.for_radar(rc))
+            for floors, kw in (("1/2", {}), ("2/4", {"min_azimuth_std": 2 * DEG,
+                                                      "min_elevation_std": 4 * DEG})):
+                model = radar_sensor_model(rc, **kw)
+                occ = occupancy_from_frames(mapped, m[:, :3, :3], m[:, :3, 3],
+                                            frame_evidence(model, settings), settings)
+                out[(clouds_name, poses_name, floors)] = threshold_scores(occ, run, truth)
+    return out
+
+
+def _slam(cache: Path, run, clouds, scene: str, seed: int, laps: float) -> dict:
+    """SLAM on the degraded clouds (cached): its ``trajectory``, ``map_points`` (the point map)
+    and ``seconds``."""
+    from coloradar.odometry import ego_velocity_config
+    from coloradar.slam import slam_from_clouds
+    from coloradar.slam.frontend import FrontEndSettings
+
+    f = cache / f"{scene}_{seed}_{laps}_slam.pkl"
+    if f.is_file():
+        with open(f, "rb") as fh:
+            return pickle.load(fh)
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -182,27 +280,22 @@ def single_chip(cache: Path, scene: str, seed: int, laps: float,
                                frontend=FrontEndSettings(ego_velocity_config(
                                    run.calib.radar("single_chip")), seed=seed),
                                groundtruth=run.groundtruth)
-    t_slam = time.perf_counter() - t0
-    b_T_r = run.calib.transforms["single_chip"].matrix()
-    keep = res.trajectory.covers(run.timestamps)          # frames SLAM placed
-    m = res.trajectory.interpolate(run.timestamps[keep]).matrices() @ b_T_r
-    model = radar_sensor_model(run.calib.radar("single_chip"))
-    t0 = time.perf_counter()
-    mapped = [c for c, k in zip(clouds, keep, strict=True) if k]
-    if static_gate:          # as `coloradar map` does: the sensor's velocity from SLAM's poses
-        vel = rig_velocity(res.trajectory, run.timestamps[keep], calib=run.calib,
-                           sensor="single_chip").linear
-        mapped = static_frames(mapped, vel, StaticTest.for_radar(run.calib.radar("single_chip")))
-    occ = occupancy_from_frames(mapped, m[:, :3, :3], m[:, :3, 3],
-                                frame_evidence(model, settings), settings)
-    t_map = time.perf_counter() - t0
-    truth = returned_scatterers(run)
-    ate = absolute_trajectory_error(res.trajectory, run.groundtruth).rmse
-    return {"scene": scene, "seed": seed, "laps": laps, "ate_m": ate,
-            "duration_s": float(run.timestamps[-1] - run.timestamps[0]),
-            "map_s": t_map, "slam_s": t_slam, "returned": len(truth),
-            "occupancy": _scores(occ.occupied(), run, truth),
-            "points": _scores(res.map_points, run, truth)}
+    out = {"trajectory": res.trajectory, "map_points": res.map_points,
+           "seconds": time.perf_counter() - t0}
+    tmp = f.with_suffix(".tmp")
+    with open(tmp, "wb") as fh:
+        pickle.dump(out, fh)
+    os.replace(tmp, f)
+    return out
+
+
+def _print_frontier(kind: str, seed: int, fr: dict) -> None:
+    for (clouds, poses, floors), sc in fr.items():
+        best_c = max((c for p, c in sc.values() if p >= 0.92), default=float("nan"))
+        best_p = max((p for p, c in sc.values() if c >= 0.85), default=float("nan"))
+        p0, c0 = sc[(OccupancySettings().min_hits, OccupancySettings().p_occupied)]
+        print(f"{kind:5s} {seed:5d}  {clouds:9s} {poses:13s} {floors:4s}  {_num(best_c):>6s}"
+              f"   {_num(best_p):>6s}    {p0:.3f} / {c0:.3f}", flush=True)
 
 
 # --- cascade: heatmaps against points, both against the lidar ----------------------------------
@@ -265,23 +358,40 @@ def _fmt(s: dict) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("part", choices=("single-chip", "cascade"))
+    ap.add_argument("part", choices=("single-chip", "cascade", "frontier"))
+    ap.add_argument("--scene", choices=SCENES, default="courtyard", help="frontier's scene")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(range(1000, 1004)))
     ap.add_argument("--cache", type=Path, default=Path("/tmp/coloradar_mc_mapping"))
     ap.add_argument("--json", type=Path)
     ap.add_argument("--open-laps", type=float, default=0.3)
     ap.add_argument("--duration", type=float, default=12.0, help="cascade runs [s]")
+    ap.add_argument("--angle-std", type=float, nargs=2, metavar=("AZ", "EL"),
+                    help="single-chip: the sensor model's angle floors [deg] (as coloradar map "
+                         "--angle-std; default the radar's own, 1 / 2)")
     args = ap.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
     settings = OccupancySettings()
     rows = []
-    if args.part == "single-chip":
+    if args.part == "frontier":
+        print(f"{args.scene}: best completeness with precision >= 0.92 | best precision with "
+              "completeness >= 0.85 | default settings P / C (all at 0.3 m)\n"
+              "kind   seed  clouds    poses         floors  C|P>=.92  P|C>=.85  default P / C",
+              flush=True)
+        for kind, laps in (("open", args.open_laps), ("loop", 2.0)):
+            for seed in args.seeds:
+                fr = frontier(args.cache, args.scene, seed, laps)
+                rows.append({"kind": kind, "seed": seed, "scores": {
+                    " ".join(k): {f"{h} {p}": v for (h, p), v in sc.items()}
+                    for k, sc in fr.items()}})
+                _print_frontier(kind, seed, fr)
+    elif args.part == "single-chip":
         print("kind  scene      seed  ATE[m]  occupancy P/C/F@0.1  P/C/F@0.3     | point map "
               "P/C/F@0.1  P/C/F@0.3   map s / run s", flush=True)
         for kind, laps in (("loop", 2.0), ("open", args.open_laps)):
             for n, seed in enumerate(args.seeds):
                 scene = SCENES[n % len(SCENES)]
-                r = single_chip(args.cache, scene, seed, laps, settings)
+                r = single_chip(args.cache, scene, seed, laps, settings,
+                                floors_deg=args.angle_std)
                 r["kind"] = kind
                 rows.append(r)
                 print(f"{kind:5s} {scene:10s} {seed:5d} {r['ate_m']:.3f}  {_fmt(r['occupancy'])}"

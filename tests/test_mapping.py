@@ -376,3 +376,31 @@ def test_the_angle_floor_follows_each_radars_aperture():
     assert f["min_azimuth_std"] == pytest.approx(0.25 * DEG) and f["min_elevation_std"] is None
     m = radar_sensor_model(calib.radar("cascade"), **f)
     assert (m.min_azimuth_std, m.min_elevation_std) == pytest.approx((0.25 * DEG, 2 * DEG))
+
+
+def test_map_takes_the_radars_direction_error_and_records_it(small_run, tmp_path, capsys):
+    # An angle error beyond what the array's resolution at the returns' SNR gives (at most
+    # 3.6° / 14.4° for the single chip's 8 / 2 positions at the 5 dB clip) spreads each return
+    # over more voxels: more voxels are hit.
+    code, _, err = _cli(["map", small_run / RUN, "--out", tmp_path / "d", "--quiet"], capsys)
+    assert code == 0, err
+    code, _, err = _cli(["map", small_run / RUN, "--out", tmp_path / "w", "--quiet",
+                         "--angle-std", "6", "20"], capsys)
+    assert code == 0, err
+    d = json.loads((tmp_path / "d" / "map.json").read_text())
+    w = json.loads((tmp_path / "w" / "map.json").read_text())
+    assert d["job"]["min_azimuth_std_deg"] is None and d["job"]["min_elevation_std_deg"] is None
+    assert (w["job"]["min_azimuth_std_deg"], w["job"]["min_elevation_std_deg"]) == (6.0, 20.0)
+    n_d = np.count_nonzero(OccupancyMap.load(tmp_path / "d" / "occupancy.npz").counts()[0])
+    n_w = np.count_nonzero(OccupancyMap.load(tmp_path / "w" / "occupancy.npz").counts()[0])
+    assert n_w > 1.1 * n_d > 0
+    for out, argv, said in ((tmp_path / "x", ["--sensor", "lidar"], "the lidar's is fixed"),
+                            (tmp_path / "p.ply", [], "a point map has none")):
+        code, _, err = _cli(["map", small_run / RUN, "--out", out, "--angle-std", "2", "4",
+                             *argv], capsys)
+        assert code != 0 and said in err, err
+        assert not out.exists()
+    with pytest.raises(SystemExit):
+        main(["map", str(small_run / RUN), "--out", str(tmp_path / "z"), "--angle-std", "0",
+              "2"])
+    assert "expected a number > 0, got '0'" in capsys.readouterr().err

@@ -79,6 +79,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "leave out those whose range rates a static world does not explain, "
                         "movers and ghosts; the sensor's velocity from the poses); the lidar "
                         "is never tested")
+    p.add_argument("--angle-std", type=positive_float, nargs=2, metavar=("AZ", "EL"),
+                   help="occupancy map of a radar: its direction error (1 sigma) in azimuth and "
+                        "elevation [deg], where a calibration or the recorder says it; the floors "
+                        "of each return's angle spread (default: the radar's own, 1 2 for the "
+                        "single chip, 0.53 2 for the cascade); a radar whose directions are "
+                        "noisier than its floors maps sharper with its own figures (docs/mapping.md)")
     p.add_argument("--ascii", action="store_true", help="point map: write ascii instead of binary")
     add_file_output_args(p)
     add_quiet_arg(p)
@@ -189,9 +195,14 @@ def _occupancy_map(args: argparse.Namespace) -> int:
     seq = open_sequence(args.run, calib=args.calib, products=args.products)
     args.sensor = args.sensor or pick_radar(seq, None, "single_chip", args.quiet)
     traj, poses_from = load_poses(seq, args.poses, args.quiet)
+    if args.angle_std and args.sensor == "lidar":
+        raise UsageError("--angle-std is a radar's direction error; the lidar's is fixed "
+                         "(0.2 degrees)")
+    az_std, el_std = args.angle_std or (None, None)
     job = OccupancyJob(sensor=args.sensor, source=args.source or "points", start=args.start,
                        duration=args.duration, stride=args.stride, max_range=args.max_range,
-                       static_gate=None if args.keep_movers else StaticGate())
+                       static_gate=None if args.keep_movers else StaticGate(),
+                       min_azimuth_std_deg=az_std, min_elevation_std_deg=el_std)
     settings = OccupancySettings(voxel=args.voxel or OccupancySettings().voxel)
     t0 = time.perf_counter()
     res = build_occupancy_map(seq, traj, job, settings, progress=Progress(
@@ -204,7 +215,9 @@ def _occupancy_map(args: argparse.Namespace) -> int:
             "source": job.source, "read_from": res.points_from, "poses": poses_from,
             "frames_mapped": int(res.frame_indices.size), "seconds": round(seconds, 3),
             "settings": asdict(settings),
-            "job": {**{k: getattr(job, k) for k in ("start", "duration", "stride", "max_range")},
+            "job": {**{k: getattr(job, k) for k in ("start", "duration", "stride", "max_range",
+                                                    "min_azimuth_std_deg",
+                                                    "min_elevation_std_deg")},
                     "static_gate": None if job.static_gate is None or job.sensor == "lidar"
                     else asdict(job.static_gate)},
             "static_test": res.static_test}
@@ -257,6 +270,9 @@ def run(args: argparse.Namespace) -> int:
         raise FormatError(f"{args.out}: --source makes an occupancy map, written to a folder: "
                           "give --out a folder name (no .pcd / .ply suffix)")
     if suffix in (".pcd", ".ply"):
+        if args.angle_std:
+            raise UsageError(f"{args.out}: --angle-std shapes an occupancy map's evidence; a "
+                             "point map has none: give --out a folder name")
         return _point_map(args)
     if args.source is None and suffix:
         raise FormatError(f"{args.out}: expected a .pcd or .ply file name (a point map) or a "
