@@ -101,15 +101,21 @@ def shared_share(ret: np.ndarray, radius: float) -> np.ndarray:
     return np.array([bool(np.any(frame[n] != frame[i])) for i, n in enumerate(near)])
 
 
-def run_one(path: Path, calib: Path) -> None:
+def open_run(path: Path, calib: Path):
+    """``(clouds, world_T_radar, returns, radar calibration, velocities)`` of a run placed with
+    its ground truth (:func:`placed_returns`; the single chip's velocity in its own frame)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         seq = cr.open_sequence(path, calib=calib)
         gt = trajectory_from_groundtruth(seq)
         clouds, m, t, ret = placed_returns(seq, gt)
-        rc = seq.calib.radar("single_chip")
         vel = rig_velocity(gt, t, calib=seq.calib, sensor="single_chip").linear
-        mapped = static_frames(clouds, vel, StaticTest.for_radar(rc))
+    return clouds, m, ret, seq.calib.radar("single_chip"), vel
+
+
+def run_one(path: Path, calib: Path) -> None:
+    clouds, m, ret, rc, vel = open_run(path, calib)
+    mapped = static_frames(clouds, vel, StaticTest.for_radar(rc))
     settings = OccupancySettings()
     multi = {r: shared_share(ret, r) for r in (0.15, 0.3)}
     print(f"\n{path.name}: {len(ret)} returns in {len(clouds)} frames; within 0.15 / 0.3 m "
@@ -155,13 +161,7 @@ def turned(clouds: list[np.ndarray], az_deg: float, el_deg: float, seed: int) ->
 
 def inject(path: Path, calib: Path, seeds: list[int]) -> None:
     """The module docstring's ``--inject``."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        seq = cr.open_sequence(path, calib=calib)
-        gt = trajectory_from_groundtruth(seq)
-        clouds, m, t, ret = placed_returns(seq, gt)
-        rc = seq.calib.radar("single_chip")
-        vel = rig_velocity(gt, t, calib=seq.calib, sensor="single_chip").linear
+    clouds, m, ret, rc, vel = open_run(path, calib)
     settings = OccupancySettings()
     model = radar_sensor_model(rc)
     tree = cKDTree(ret[:, :3])
