@@ -183,6 +183,9 @@ def _occupancy_map(args: argparse.Namespace) -> int:
     from ..mapping.output import default_band, map_targets, write_map_folder
 
     _check_poses_input(args.poses)
+    if args.angle_std and args.sensor == "lidar":
+        raise UsageError("--angle-std is a radar's direction error; the lidar's is fixed "
+                         "(0.2 degrees)")
     if args.band and not args.band[0] < args.band[1]:
         raise UsageError(f"--band {args.band[0]:g} {args.band[1]:g}: expected ZMIN < ZMAX")
     if args.rerun:
@@ -195,9 +198,6 @@ def _occupancy_map(args: argparse.Namespace) -> int:
     seq = open_sequence(args.run, calib=args.calib, products=args.products)
     args.sensor = args.sensor or pick_radar(seq, None, "single_chip", args.quiet)
     traj, poses_from = load_poses(seq, args.poses, args.quiet)
-    if args.angle_std and args.sensor == "lidar":
-        raise UsageError("--angle-std is a radar's direction error; the lidar's is fixed "
-                         "(0.2 degrees)")
     az_std, el_std = args.angle_std or (None, None)
     job = OccupancyJob(sensor=args.sensor, source=args.source or "points", start=args.start,
                        duration=args.duration, stride=args.stride, max_range=args.max_range,
