@@ -34,6 +34,7 @@ precision ≥ 0.92, and the default setting's precision / completeness (means ov
 from __future__ import annotations
 
 import argparse
+import sys
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -53,6 +54,9 @@ from coloradar.mapping import (
 )
 from coloradar.mapping.build import frame_evidence
 from coloradar.mapping.voxels import FREE, UNKNOWN
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from mc_mapping import frontier_best, threshold_sweep, turn_directions
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 DEG = np.pi / 180
@@ -140,23 +144,11 @@ def run_one(path: Path, calib: Path) -> None:
               + f"      {np.mean(st == FREE):.2f} / {np.mean(st == UNKNOWN):.2f}", flush=True)
 
 
-INJECT_HITS = (1, 2, 3)
-INJECT_P = (0.50, 0.505, 0.51, 0.515, 0.52, 0.53, 0.55, 0.6, 0.7)
-
-
 def turned(clouds: list[np.ndarray], az_deg: float, el_deg: float, seed: int) -> list[np.ndarray]:
     """Each return's direction turned by Gaussian errors [deg], its range and columns kept."""
     rng = np.random.default_rng([seed, 4040])
-    out = []
-    for c in clouds:
-        r = np.linalg.norm(c[:, :3], axis=1)
-        az = np.arctan2(c[:, 1], c[:, 0]) + rng.normal(0, az_deg * DEG, len(c))
-        el = np.arcsin(np.clip(c[:, 2] / np.maximum(r, 1e-9), -1, 1)) + \
-            rng.normal(0, el_deg * DEG, len(c))
-        xyz = r[:, None] * np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
-                                            np.sin(el)])
-        out.append(np.column_stack([xyz, c[:, 3:]]).astype(np.float32))
-    return out
+    return [np.column_stack([turn_directions(c, az_deg, el_deg, rng), c[:, 3:]]).astype(np.float32)
+            for c in clouds]
 
 
 def inject(path: Path, calib: Path, seeds: list[int]) -> None:
@@ -173,19 +165,11 @@ def inject(path: Path, calib: Path, seeds: list[int]) -> None:
             mapped = static_frames(turned(clouds, az, el, seed), vel, StaticTest.for_radar(rc))
             occ = occupancy_from_frames(mapped, m[:, :3, :3], m[:, :3, 3],
                                         frame_evidence(model, settings), settings)
-            lo, hits = occ.logodds(), occ.counts()[0]
-            centers = occ.centers()
-            scores = {}
-            for h in INJECT_HITS:
-                for p in INJECT_P:
-                    k = (lo > np.log(p / (1 - p))) & (hits >= h)
-                    if not k.any():
-                        continue
-                    prec = float(np.mean(tree.query(centers[k])[0] <= 0.3))
-                    comp = float(np.mean(cKDTree(centers[k]).query(ret[:, :3])[0] <= 0.3))
-                    scores[(h, p)] = (prec, comp)
-            best.append(max((c for p, c in scores.values() if p >= 0.92), default=0.0))
-            default.append(scores.get((settings.min_hits, settings.p_occupied), (np.nan, 0.0)))
+            scores = threshold_sweep(
+                occ, lambda c: tree.query(c)[0] <= 0.3,
+                lambda c: float(np.mean(cKDTree(c).query(ret[:, :3])[0] <= 0.3)))
+            best.append(np.nan_to_num(frontier_best(scores)[0]))
+            default.append(scores[(settings.min_hits, settings.p_occupied)])
         d = np.array(default)
         print(f"  azimuth {az:g}°, elevation {el:g}°: {np.mean(best):.3f} | "
               f"{np.nanmean(d[:, 0]):.3f} / {np.mean(d[:, 1]):.3f}", flush=True)

@@ -57,6 +57,7 @@ import subprocess
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -124,17 +125,24 @@ def returned_scatterers(run) -> np.ndarray:
     return scat[np.unique(i[d <= 0.5])]
 
 
+def turn_directions(cloud: np.ndarray, az_std_deg: float, el_std_deg: float,
+                    rng: np.random.Generator) -> np.ndarray:
+    """float64 ``(N, 3)``: each point of ``cloud`` (sensor frame) at its own range, its azimuth
+    and elevation turned by Gaussian errors of the given standard deviations [deg]."""
+    r = np.linalg.norm(cloud[:, :3], axis=1)
+    az = np.arctan2(cloud[:, 1], cloud[:, 0]) + rng.normal(0, az_std_deg * DEG, len(cloud))
+    el = np.arcsin(np.clip(cloud[:, 2] / np.maximum(r, 1e-9), -1, 1)) + \
+        rng.normal(0, el_std_deg * DEG, len(cloud))
+    return r[:, None] * np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
+                                         np.sin(el)])
+
+
 def degrade(clouds: list[np.ndarray], seed: int) -> list[np.ndarray]:
     """2° / 4° direction noise on every point, 10 % ghosts added (module docstring)."""
     rng = np.random.default_rng([seed, 4040])
     out = []
     for c in clouds:
-        r = np.linalg.norm(c[:, :3], axis=1)
-        az = np.arctan2(c[:, 1], c[:, 0]) + rng.normal(0, 2 * DEG, len(c))
-        el = np.arcsin(np.clip(c[:, 2] / np.maximum(r, 1e-9), -1, 1)) + rng.normal(0, 4 * DEG,
-                                                                                  len(c))
-        xyz = r[:, None] * np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az),
-                                            np.sin(el)])
+        xyz = turn_directions(c, 2.0, 4.0, rng)
         n_g = int(rng.binomial(max(len(c), 1), 0.1 / 0.9))
         g_az, g_el = rng.uniform(-60, 60, n_g) * DEG, rng.uniform(-20, 20, n_g) * DEG
         g_r = rng.uniform(1, 12, n_g)
@@ -214,25 +222,40 @@ FRONTIER_HITS = (1, 2, 3)
 FRONTIER_P = (0.50, 0.505, 0.51, 0.515, 0.52, 0.53, 0.55, 0.6, 0.7)
 
 
-def threshold_scores(occ, run, truth: np.ndarray, tau: float = 0.3) -> dict:
-    """Precision / completeness at ``tau`` of ``occ``'s voxels thresholded at every
-    ``(min_hits, p_occupied)`` of :data:`FRONTIER_HITS` × :data:`FRONTIER_P`."""
-    centers = occ.centers()
+def threshold_sweep(occ, precise: Callable[[np.ndarray], np.ndarray],
+                    completeness: Callable[[np.ndarray], float]) -> dict:
+    """``{(min_hits, p_occupied): (precision, completeness)}`` of ``occ``'s voxels thresholded
+    at every pair of :data:`FRONTIER_HITS` × :data:`FRONTIER_P` (one build, many maps).
+
+    ``precise(centres)``: bool ``(M,)``, which voxel centres lie near the truth (called once, on
+    every voxel above the lowest threshold); ``completeness(centres)``: the share of the truth
+    near the occupied centres."""
     lo = occ.logodds()
     hits = occ.counts()[0]
     cand = lo > np.log(FRONTIER_P[0] / (1 - FRONTIER_P[0]))
-    c = centers[cand]
-    d_map = surface_distance(c, run.scene)
+    c = occ.centers()[cand]
+    near = precise(c)
     out = {}
     for h in FRONTIER_HITS:
         for p in FRONTIER_P:
             k = (lo[cand] > np.log(p / (1 - p))) & (hits[cand] >= h)
-            if not k.any():
-                out[(h, p)] = (float("nan"), 0.0)
-                continue
-            d_ret = nearest_distances(truth, c[k])
-            out[(h, p)] = (float(np.mean(d_map[k] <= tau)), float(np.mean(d_ret <= tau)))
+            out[(h, p)] = ((float(np.mean(near[k])), completeness(c[k])) if k.any()
+                           else (float("nan"), 0.0))
     return out
+
+
+def threshold_scores(occ, run, truth: np.ndarray, tau: float = 0.3) -> dict:
+    """:func:`threshold_sweep` against the scene: precision within ``tau`` of a true surface,
+    completeness over the returned scatterers ``truth``."""
+    return threshold_sweep(occ, lambda c: surface_distance(c, run.scene) <= tau,
+                           lambda c: float(np.mean(nearest_distances(truth, c) <= tau)))
+
+
+def frontier_best(scores: dict) -> tuple[float, float]:
+    """The best completeness among the settings with precision >= 0.92 and the best precision
+    among those with completeness >= 0.85 (nan where none reaches it)."""
+    return (max((c for p, c in scores.values() if p >= 0.92), default=float("nan")),
+            max((p for p, c in scores.values() if c >= 0.85), default=float("nan")))
 
 
 def frontier(cache: Path, scene: str, seed: int, laps: float) -> dict:
@@ -293,9 +316,9 @@ def _slam(cache: Path, run, clouds, scene: str, seed: int, laps: float) -> dict:
 
 def _print_frontier(kind: str, seed: int, fr: dict) -> None:
     for (clouds, poses, floors), sc in fr.items():
-        best_c = max((c for p, c in sc.values() if p >= 0.92), default=float("nan"))
-        best_p = max((p for p, c in sc.values() if c >= 0.85), default=float("nan"))
-        p0, c0 = sc[(OccupancySettings().min_hits, OccupancySettings().p_occupied)]
+        best_c, best_p = frontier_best(sc)
+        default = OccupancySettings()
+        p0, c0 = sc[(default.min_hits, default.p_occupied)]
         print(f"{kind:5s} {seed:5d}  {clouds:9s} {poses:13s} {floors:4s}  {_num(best_c):>6s}"
               f"   {_num(best_p):>6s}    {p0:.3f} / {c0:.3f}", flush=True)
 
